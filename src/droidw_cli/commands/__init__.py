@@ -1,0 +1,1 @@
+"""Thin click entry points; the work happens in the core packages."""

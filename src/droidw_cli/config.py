@@ -1,0 +1,276 @@
+"""Configuration: YAML files with ``inherit_from`` plus ``--set key=value``.
+
+A config file is a mapping of sections (``io``, ``motion_filter``, ...) that
+map one-to-one onto the frozen dataclasses below.  ``inherit_from: NAME``
+(a file name relative to the including file, or a built-in config name)
+loads a parent first; the child's keys override it section by section.
+``--set frontend.window=30`` overrides one key, its value parsed as YAML.
+An unknown key is an error naming the key and the file it came from.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from droidw_cli.ba.params import BAParams, UncertaintyParams
+from droidw_cli.errors import ConfigError
+
+CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
+
+
+@dataclass(frozen=True)
+class IOConfig:
+    """Frame preparation.  ``target_area``: pixels of the working image (384×512 by default)."""
+
+    target_area: int = 384 * 512
+    fps: float = 30.0
+    stride: int = 1
+    start: int = 0
+    max_frames: int = 0  # 0 = all
+    thumbnail_scale: int = 4  # keyframe thumbnails at 1/thumbnail_scale of the working size
+
+
+@dataclass(frozen=True)
+class CalibConfig:
+    """Self-calibration for ``--calib auto``: focal search range as a multiple of max(H, W)."""
+
+    focal_min: float = 0.5
+    focal_max: float = 2.0
+    focal_init: float = 0.9
+
+
+@dataclass(frozen=True)
+class MotionFilterConfig:
+    """A frame is a keyframe candidate when mean flow to the last keyframe ≥ thresh px."""
+
+    thresh: float = 3.0
+    max_gap: int = 9  # force a keyframe every max_gap frames
+
+
+@dataclass(frozen=True)
+class CorrespondenceConfig:
+    """The correspondence source (a plugin; ``dis`` = OpenCV DIS optical flow)."""
+
+    name: str = "dis"
+    preset: str = "medium"
+    fb_thresh: float = 1.0  # forward-backward consistency threshold, full-res px
+    photo_sigma: float = 0.1  # photometric agreement scale (intensity in [0, 1])
+
+
+@dataclass(frozen=True)
+class FeaturesConfig:
+    """The dense feature extractor (a plugin; ``xfeat`` by default)."""
+
+    name: str = "xfeat"
+    half: bool = True  # store features as float16 in the keyframe buffer
+
+
+@dataclass(frozen=True)
+class FrontendConfig:
+    """Sliding-window local BA (DROID-SLAM defaults)."""
+
+    warmup: int = 12
+    init_iters: int = 40
+    radius: int = 2
+    window: int = 25
+    max_edges: int = 75
+    flow_thresh: float = 16.0
+    keyframe_thresh: float = 3.0
+    beta: float = 0.75
+    iters1: int = 3
+    iters2: int = 2
+    velocity_damping: float = 0.5
+
+
+@dataclass(frozen=True)
+class BackendConfig:
+    """Final global BA over all keyframes with proximity edges."""
+
+    enable: bool = True
+    flow_thresh: float = 25.0
+    radius: int = 1
+    nms: int = 5
+    iters: int = 12
+    max_edges_per_frame: int = 6
+
+
+@dataclass(frozen=True)
+class FillerConfig:
+    """Poses for non-keyframes: SE(3) interpolation then motion-only BA."""
+
+    iters: int = 3
+
+
+@dataclass(frozen=True)
+class DynamicsConfig:
+    """ADD-SLAM style scene-consistency masks."""
+
+    enable: bool = False
+    tau_scale: float = 20.0
+    every: int = 5
+
+
+@dataclass(frozen=True)
+class TrackConfig:
+    """Everything ``droidw track`` needs.  ``ba.uncertainty`` mirrors ``uncertainty``."""
+
+    io: IOConfig = field(default_factory=IOConfig)
+    calib: CalibConfig = field(default_factory=CalibConfig)
+    motion_filter: MotionFilterConfig = field(default_factory=MotionFilterConfig)
+    correspondence: CorrespondenceConfig = field(default_factory=CorrespondenceConfig)
+    features: FeaturesConfig = field(default_factory=FeaturesConfig)
+    frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    backend: BackendConfig = field(default_factory=BackendConfig)
+    filler: FillerConfig = field(default_factory=FillerConfig)
+    dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
+    uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
+    ba: BAParams = field(default_factory=BAParams)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        # The uncertainty section is the single source of truth for the BA's copy.
+        object.__setattr__(self, "ba", dataclasses.replace(self.ba, uncertainty=self.uncertainty))
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["ba"].pop("uncertainty", None)
+        return d
+
+
+# Keys of nested dataclasses that a config file may not set directly.
+_HIDDEN = {(BAParams, "uncertainty")}
+
+
+def _resolve_type(tp: Any) -> Any:
+    if isinstance(tp, str):
+        return eval(tp, vars(typing) | vars(types))  # noqa: S307 - annotations of our own dataclasses
+    return tp
+
+
+def _coerce(value: Any, tp: Any, key: str, source: str) -> Any:
+    tp = _resolve_type(tp)
+    if tp is Any:
+        return value
+    if tp is bool:
+        if isinstance(value, bool):
+            return value
+        raise ConfigError(f"{source}: {key} must be true or false, got {value!r}")
+    if tp is float:
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise ConfigError(f"{source}: {key} must be a number, got {value!r}")
+    if tp is int:
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        raise ConfigError(f"{source}: {key} must be an integer, got {value!r}")
+    if tp is str:
+        if isinstance(value, str):
+            return value
+        raise ConfigError(f"{source}: {key} must be a string, got {value!r}")
+    return value
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _build(cls: type, data: dict, sources: dict[str, str], prefix: str = "") -> Any:
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls) if (cls, f.name) not in _HIDDEN}
+    kwargs = {}
+    for key, value in data.items():
+        full = f"{prefix}{key}"
+        source = sources.get(full, sources.get(prefix.rstrip("."), "config"))
+        if key not in names:
+            raise ConfigError(f"{source}: unknown config key '{full}' (valid keys here: {', '.join(sorted(names))})")
+        tp = hints[key]
+        if dataclasses.is_dataclass(tp):
+            if not isinstance(value, dict):
+                raise ConfigError(f"{source}: '{full}' must be a mapping")
+            kwargs[key] = _build(tp, value, sources, full + ".")
+        else:
+            kwargs[key] = _coerce(value, tp, full, source)
+    try:
+        return cls(**kwargs)
+    except ValueError as exc:
+        raise ConfigError(f"{sources.get(prefix.rstrip('.'), 'config')}: {exc}") from None
+
+
+def _record_sources(data: dict, source: str, sources: dict[str, str], prefix: str = "") -> None:
+    for k, v in data.items():
+        sources[f"{prefix}{k}"] = source
+        if isinstance(v, dict):
+            _record_sources(v, source, sources, f"{prefix}{k}.")
+
+
+def find_config(name_or_path: str | Path, relative_to: Path | None = None) -> Path:
+    """A config path from a file path or a built-in name (``default``, ``tum`` ...)."""
+    p = Path(name_or_path)
+    candidates = [p]
+    if relative_to is not None:
+        candidates.append(relative_to / p)
+    candidates += [CONFIG_DIR / p, CONFIG_DIR / f"{p}.yaml"]
+    for c in candidates:
+        if c.is_file():
+            return c
+    builtin = ", ".join(sorted(x.stem for x in CONFIG_DIR.glob("*.yaml"))) if CONFIG_DIR.is_dir() else "none"
+    raise ConfigError(f"config '{name_or_path}' not found (built-in configs: {builtin})")
+
+
+def _load_tree(path: Path, sources: dict[str, str], seen: tuple[Path, ...] = ()) -> dict:
+    path = path.resolve()
+    if path in seen:
+        raise ConfigError(f"{path}: inherit_from forms a cycle")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: invalid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: a config file must be a mapping of sections")
+    parent_name = data.pop("inherit_from", None)
+    base: dict = {}
+    if parent_name:
+        base = _load_tree(find_config(parent_name, path.parent), sources, seen + (path,))
+    _record_sources(data, str(path), sources)
+    return _merge(base, data)
+
+
+def parse_overrides(overrides: list[str] | tuple[str, ...]) -> dict:
+    """``["a.b=1", "c.d=x"]`` → nested dict, values parsed as YAML scalars."""
+    out: dict = {}
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"--set {item!r}: expected key.sub=value")
+        key, raw = item.split("=", 1)
+        key = key.strip()
+        if not key:
+            raise ConfigError(f"--set {item!r}: empty key")
+        try:
+            value = yaml.safe_load(raw) if raw.strip() else ""
+        except yaml.YAMLError:
+            value = raw
+        node = out
+        parts = key.split(".")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+        node[parts[-1]] = value
+    return out
+
+
+def load_config(name_or_path: str | Path = "default", overrides: list[str] | tuple[str, ...] = ()) -> TrackConfig:
+    """Load a config (with inheritance) and apply ``--set`` overrides."""
+    sources: dict[str, str] = {}
+    data = _load_tree(find_config(name_or_path), sources)
+    over = parse_overrides(overrides)
+    _record_sources(over, "--set", sources)
+    return _build(TrackConfig, _merge(data, over), sources)
