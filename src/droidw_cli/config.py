@@ -35,6 +35,7 @@ class IOConfig:
     start: int = 0
     max_frames: int = 0  # 0 = all
     thumbnail_scale: int = 4  # keyframe thumbnails at 1/thumbnail_scale of the working size
+    use_depth: bool = False  # RGB-D: sensor depth feeds the depth-prior term (rgbd.yaml)
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,7 @@ class FrontendConfig:
 
     warmup: int = 12
     init_iters: int = 40
+    init_min_parallax: float = 3.0  # median flow (px) a keyframe needs before initialisation
     radius: int = 2
     window: int = 25
     max_edges: int = 75

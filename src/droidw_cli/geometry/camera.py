@@ -56,3 +56,9 @@ def resize_crop_intrinsics(intrinsics, src_hw: tuple[int, int], resized_hw: tupl
     sy, sx = resized_hw[0] / src_hw[0], resized_hw[1] / src_hw[1]
     oy, ox = (resized_hw[0] - crop_hw[0]) // 2, (resized_hw[1] - crop_hw[1]) // 2
     return np.array([fx * sx, fy * sy, (cx + 0.5) * sx - 0.5 - ox, (cy + 0.5) * sy - 0.5 - oy], dtype=np.float64)
+
+
+def unscale_intrinsics(intrinsics, scale: float):
+    """Inverse of :func:`scale_intrinsics`: f = s·f', c = s·(c' + ½) − ½."""
+    fx, fy, cx, cy = intrinsics[0], intrinsics[1], intrinsics[2], intrinsics[3]
+    return np.array([fx * scale, fy * scale, (cx + 0.5) * scale - 0.5, (cy + 0.5) * scale - 0.5], dtype=np.float64)

@@ -241,20 +241,25 @@ def format_trajectory(traj: Trajectory, fmt: str = "tum") -> str:
 
 
 def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write a file via a temporary name and an atomic rename (no partial files)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    """Write a text file via a temporary name and an atomic rename (no partial files)."""
+    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def write_trajectory(path: str | Path, traj: Trajectory, fmt: str = "tum") -> None:
     """Write a trajectory atomically in ``tum``, ``kitti`` or ``euroc`` format."""
     atomic_write_text(path, format_trajectory(traj, fmt))
+
+
+def atomic_write_bytes(path: str | Path, payload: bytes) -> None:
+    """Write a file via a temporary name in the same folder and an atomic rename."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(payload)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

@@ -1,0 +1,85 @@
+"""``droidw export``: point clouds and uncertainty overlays from a run folder."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from droidw_cli.errors import InputError
+
+
+def load_run(run_dir: Path) -> dict:
+    """The arrays of ``RUN_DIR/keyframes.npz`` (a clear error if it is missing or unreadable)."""
+    import numpy as np
+
+    path = run_dir / "keyframes.npz" if run_dir.is_dir() else run_dir
+    if not path.is_file():
+        raise InputError(f"{path}: no such file; run `droidw track ... --out {run_dir}` first")
+    try:
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files}
+    except Exception as exc:  # noqa: BLE001 - any unreadable npz is a user-facing error
+        raise InputError(f"{path}: cannot read keyframes ({exc})") from None
+
+
+@click.group("export")
+def export() -> None:
+    """Export a run: PLY point clouds, uncertainty overlays.
+
+    \b
+    Examples:
+      droidw export ply                      # inside a run folder: ./static.ply
+      droidw export ply run/ --what dynamic --out dynamic.ply
+      droidw export uncertainty run/ --out overlays/ --video
+    """
+
+
+@export.command("ply")
+@click.argument("run_dir", type=click.Path(path_type=Path), default=Path("."), required=False)
+@click.option("--out", "out", type=click.Path(path_type=Path), default=None,
+              help="Output PLY (default ./static.ply, ./dynamic.ply or ./points.ply).")
+@click.option("--what", type=click.Choice(["static", "dynamic", "all"]), default="static", show_default=True)
+@click.option("--max-uncertainty", type=float, default=0.8, show_default=True,
+              help="Static points need u below this (0.8 is where the BA weighting starts to cut in).")
+@click.option("--min-views", type=int, default=2, show_default=True, help="Neighbouring keyframes that must agree.")
+@click.option("--stride", type=int, default=1, show_default=True, help="Use every N-th keyframe.")
+def ply(run_dir, out, what, max_uncertainty, min_views, stride):
+    """Write the keyframes' points as a binary PLY in world coordinates.
+
+    The static cloud keeps points with low uncertainty that several views
+    agree on; the dynamic cloud holds the rest, each point with its keyframe
+    time (vertex property `time`).
+    """
+    from droidw_cli.export.pointcloud import CloudParams, build_cloud, write_ply
+
+    if stride < 1 or min_views < 0:
+        raise InputError("--stride must be ≥ 1 and --min-views ≥ 0")
+    npz = load_run(run_dir)
+    cloud = build_cloud(npz, CloudParams(max_uncertainty=max_uncertainty, min_views=min_views, stride=stride))
+    default_name = {"static": "static.ply", "dynamic": "dynamic.ply", "all": "points.ply"}[what]
+    out = out or Path(default_name)
+    if what == "static":
+        part = cloud.select(cloud.static)
+    elif what == "dynamic":
+        part = cloud.select(~cloud.static)
+    else:
+        part = cloud
+    n = write_ply(out, part, with_time=what != "static")
+    click.echo(f"wrote {n} points to {out}")
+
+
+@export.command("uncertainty")
+@click.argument("run_dir", type=click.Path(path_type=Path), default=Path("."), required=False)
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("uncertainty"), show_default=True)
+@click.option("--video", is_flag=True, help="Also write overlay.mp4.")
+def uncertainty(run_dir, out, video):
+    """Write a PNG overlay of the uncertainty u for each keyframe (with a legend)."""
+    from droidw_cli.export.overlay import write_overlays
+
+    npz = load_run(run_dir)
+    try:
+        paths = write_overlays(npz, out, video=video)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    click.echo(f"wrote {len(paths)} files to {out}")

@@ -1,0 +1,100 @@
+"""``droidw track``: run the SLAM pipeline on a video or image sequence."""
+
+from __future__ import annotations
+
+import resource
+import sys
+from pathlib import Path
+
+import click
+
+from droidw_cli.commands.options import config_option, set_option
+
+
+def peak_memory_mb() -> float:
+    """Peak resident memory of this process in MiB (Linux ru_maxrss is in KiB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def run_track(input_path, out_dir, calib=None, backend="auto", config_name="default", overrides=(),
+              stride=None, start=None, max_frames=None, progress=True, echo=click.echo):
+    """The work behind ``droidw track`` (also used by ``droidw demo`` and the benchmarks).
+
+    Returns (TrackResult, list of written paths).
+    """
+    import dataclasses
+
+    import torch
+
+    from droidw_cli.ba.registry import get_backend
+    from droidw_cli.config import load_config
+    from droidw_cli.correspondence import get_correspondence_source
+    from droidw_cli.export.run_files import run_info, write_run
+    from droidw_cli.features import get_feature_extractor
+    from droidw_cli.io.calibration import load_calibration
+    from droidw_cli.io.frames import open_source
+    from droidw_cli.slam.tracker import Tracker
+
+    cfg = load_config(config_name, overrides)
+    io = cfg.io
+    io = dataclasses.replace(io, **{k: v for k, v in (("stride", stride), ("start", start), ("max_frames", max_frames))
+                                    if v is not None})
+    cfg = dataclasses.replace(cfg, io=io)
+    torch.manual_seed(cfg.seed)
+    source = open_source(input_path, stride=io.stride, start=io.start, max_frames=io.max_frames, fps=io.fps)
+    if calib is None:  # the calibration that came with the data, else estimate it
+        calibration = source.intrinsics_hint
+        if calibration is not None:
+            calibration.validate(source.size, "the input's calibration")
+    elif calib == "auto":
+        calibration = None
+    else:
+        calibration = load_calibration(calib, image_size=source.size)
+    ba_backend = get_backend(backend)
+    corr = get_correspondence_source(cfg.correspondence)
+    features = get_feature_extractor(cfg.features.name) if cfg.uncertainty.enable else None
+    result = Tracker(cfg, ba_backend, corr, features, progress=progress).run(source, calibration)
+    info = run_info(result, cfg.to_dict(), ba_backend.name, str(input_path), peak_memory_mb())
+    info["calibration"]["source"] = "estimated" if result.calibration_estimated else (str(calib) if calib else "input")
+    paths = write_run(out_dir, result, info)
+    return result, paths
+
+
+@click.command("track")
+@click.argument("input_path", metavar="INPUT", type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("droidw-run"), show_default=True,
+              help="Output folder: traj.txt, keyframes.npz, calib.txt, run.json.")
+@click.option("--calib", default=None, metavar="FILE|auto",
+              help="Calibration file (fx fy cx cy [k1 k2 p1 p2 [k3]] or YAML), or 'auto' to estimate the focal "
+                   "length.  Default: the calibration found with the input (calib.txt, EuRoC sensor.yaml), else auto.")
+@click.option("--backend", default="auto", show_default=True, help="BA backend: auto, cpu, cuda (see `droidw backends`).")
+@config_option
+@set_option
+@click.option("--stride", type=int, default=None, help="Use every N-th frame.")
+@click.option("--start", type=int, default=None, help="Skip the first N frames.")
+@click.option("--max-frames", type=int, default=None, help="Stop after N frames (0 = all).")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def track(input_path, out_dir, calib, backend, config_name, overrides, stride, start, max_frames, quiet):
+    """Track INPUT (a video, an image folder, a TUM/Bonn or EuRoC folder).
+
+    Writes a camera-to-world pose for every input frame (TUM format, the
+    input's own timestamps) plus the keyframes' depth and uncertainty.
+
+    \b
+    Examples:
+      droidw track video.mp4 --calib auto --out run/
+      droidw track rgbd_dataset_freiburg3_walking_xyz/ --calib calib.txt --config tum --out run/
+      droidw track frames/ --set uncertainty.enable=false --out baseline/
+    """
+    progress = not quiet and sys.stderr.isatty()
+    result, paths = run_track(input_path, out_dir, calib, backend, config_name, overrides, stride, start,
+                              max_frames, progress)
+    for w in result.warnings:
+        click.echo(f"droidw: warning: {w}", err=True)
+    click.echo(f"{len(result.timestamps)} frames, {len(result.kf_index)} keyframes, "
+               f"{result.fps:.1f} frames/s end to end")
+    if result.calibration_estimated:
+        c = result.calibration
+        click.echo(f"estimated calibration: fx={c.fx:.2f} fy={c.fy:.2f} cx={c.cx:.2f} cy={c.cy:.2f}")
+    for p in paths:
+        click.echo(f"wrote {p}")

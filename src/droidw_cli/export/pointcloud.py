@@ -1,0 +1,120 @@
+"""Keyframe point clouds from a run, split into static and dynamic points.
+
+Every 1/8-grid pixel p of keyframe k with disparity d becomes the world point
+X = G_k⁻¹ · Π⁻¹(p, d).  A point is **static** when its uncertainty u is under
+``max_uncertainty`` *and* several views agree on it: projected into the
+neighbouring keyframes k ± 1 … k ± ``radius``, its disparity matches theirs
+(bilinearly sampled) within ``rel_tol`` in at least ``min_views`` of them.
+Everything else is **dynamic**, tagged with its keyframe's time.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics
+from droidw_cli.io.trajectory import atomic_write_bytes
+
+
+@dataclass(frozen=True)
+class CloudParams:
+    max_uncertainty: float = 0.8
+    min_views: int = 2
+    radius: int = 2
+    rel_tol: float = 0.05
+    stride: int = 1  # use every N-th keyframe
+
+
+@dataclass(frozen=True)
+class Cloud:
+    """Points (P, 3) float32, colours (P, 3) uint8, keyframe time (P,), uncertainty (P,), static flag (P,)."""
+
+    xyz: np.ndarray
+    rgb: np.ndarray
+    time: np.ndarray
+    uncertainty: np.ndarray
+    static: np.ndarray
+
+    def select(self, mask: np.ndarray) -> "Cloud":
+        return Cloud(self.xyz[mask], self.rgb[mask], self.time[mask], self.uncertainty[mask], self.static[mask])
+
+
+def _backproject(disps: torch.Tensor, k8: torch.Tensor) -> torch.Tensor:
+    """(K, h, w) disparities → (K, h, w, 3) camera points."""
+    _, h, w = disps.shape
+    ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float64), torch.arange(w, dtype=torch.float64), indexing="ij")
+    z = 1.0 / disps.double().clamp(min=1e-6)
+    x = (xs - k8[2]) / k8[0] * z
+    y = (ys - k8[3]) / k8[1] * z
+    return torch.stack([x, y, z], -1)
+
+
+def multiview_support(disps: np.ndarray, poses_c2w: np.ndarray, k8: np.ndarray, radius: int, rel_tol: float) -> np.ndarray:
+    """(K, h, w) count of neighbouring keyframes that agree with each pixel's depth."""
+    d = torch.from_numpy(disps).double()
+    kf, h, w = d.shape
+    cam = _backproject(d, torch.from_numpy(k8))
+    c2w = torch.from_numpy(poses_c2w).double()
+    world = torch.einsum("kab,khwb->khwa", c2w[:, :3, :3], cam) + c2w[:, None, None, :3, 3]
+    w2c = torch.linalg.inv(c2w)
+    support = torch.zeros(kf, h, w, dtype=torch.int32)
+    for off in [o for r in range(1, radius + 1) for o in (r, -r)]:  # a loop over view offsets, not pixels
+        src = torch.arange(max(0, -off), min(kf, kf - off))
+        if src.numel() == 0:
+            continue
+        dst = src + off
+        p = torch.einsum("kab,khwb->khwa", w2c[dst, :3, :3], world[src]) + w2c[dst, None, None, :3, 3]
+        z = p[..., 2]
+        u = k8[0] * p[..., 0] / z.clamp(min=1e-6) + k8[2]
+        v = k8[1] * p[..., 1] / z.clamp(min=1e-6) + k8[3]
+        grid = torch.stack([2 * u / (w - 1) - 1, 2 * v / (h - 1) - 1], -1)
+        sampled = F.grid_sample(d[dst, None], grid, mode="bilinear", align_corners=True, padding_mode="zeros")[:, 0]
+        proj_disp = 1.0 / z.clamp(min=1e-6)
+        inside = (z > 1e-3) & (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1) & (sampled > 0)
+        agree = inside & ((proj_disp - sampled).abs() <= rel_tol * sampled)
+        support[src] += agree.int()
+    return support.numpy()
+
+
+def build_cloud(npz: dict, params: CloudParams) -> Cloud:
+    """All keyframe points of a run (every ``params.stride``-th keyframe), with static flags."""
+    disps = np.asarray(npz["disps"], dtype=np.float32)
+    poses = np.asarray(npz["poses_c2w"], dtype=np.float64)
+    kf, h, w = disps.shape
+    if kf == 0:
+        raise ValueError("the run has no keyframes")
+    k8 = scale_intrinsics(np.asarray(npz["intrinsics"], dtype=np.float64), BA_SCALE)
+    support = multiview_support(disps, poses, k8, params.radius, params.rel_tol)
+    unc = np.asarray(npz["uncertainty"], dtype=np.float32) if "uncertainty" in npz else np.zeros_like(disps)
+    cam = _backproject(torch.from_numpy(disps), torch.from_numpy(k8)).numpy()
+    world = np.einsum("kab,khwb->khwa", poses[:, :3, :3], cam) + poses[:, None, None, :3, 3]
+    images = np.asarray(npz["images"])
+    rgb = np.stack([cv2.resize(im, (w, h), interpolation=cv2.INTER_AREA) for im in images])
+    times = np.broadcast_to(np.asarray(npz["timestamps"], dtype=np.float64)[:, None, None], (kf, h, w))
+    static = (unc < params.max_uncertainty) & (support >= params.min_views)
+    keep = np.zeros(kf, dtype=bool)
+    keep[:: max(1, params.stride)] = True
+    sel = np.broadcast_to(keep[:, None, None], (kf, h, w))
+    return Cloud(world[sel].astype(np.float32), rgb[sel].astype(np.uint8), times[sel].copy(), unc[sel].copy(), static[sel].copy())
+
+
+def write_ply(path, cloud: Cloud, with_time: bool) -> int:
+    """Write a binary little-endian PLY (x y z red green blue [time uncertainty]); returns the point count."""
+    fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    if with_time:
+        fields += [("time", "<f8"), ("uncertainty", "<f4")]
+    data = np.empty(len(cloud.xyz), dtype=fields)
+    data["x"], data["y"], data["z"] = cloud.xyz[:, 0], cloud.xyz[:, 1], cloud.xyz[:, 2]
+    data["red"], data["green"], data["blue"] = cloud.rgb[:, 0], cloud.rgb[:, 1], cloud.rgb[:, 2]
+    if with_time:
+        data["time"], data["uncertainty"] = cloud.time, cloud.uncertainty
+    ply_types = {"<f4": "float", "u1": "uchar", "<f8": "double"}
+    header = ["ply", "format binary_little_endian 1.0", "comment written by droidw", f"element vertex {len(data)}"]
+    header += [f"property {ply_types[t]} {n}" for n, t in fields] + ["end_header"]
+    atomic_write_bytes(path, ("\n".join(header) + "\n").encode("ascii") + data.tobytes())
+    return int(len(data))

@@ -1,0 +1,91 @@
+"""Writes a ``droidw track`` run folder, all-or-nothing.
+
+Files: ``traj.txt`` (TUM, camera-to-world, every frame), ``keyframes.npz``,
+``calib.txt`` and ``run.json``.  Everything is written into a hidden
+temporary folder beside the output and moved into place only when all files
+are complete, so a failed run leaves no half-written output.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from droidw_cli import __version__
+from droidw_cli.io.calibration import format_calibration
+from droidw_cli.io.trajectory import Trajectory, format_trajectory
+
+RUN_FILES = ("traj.txt", "keyframes.npz", "calib.txt", "run.json")
+
+
+def keyframe_arrays(result) -> dict[str, np.ndarray]:
+    """The arrays stored in ``keyframes.npz``."""
+    arrays = {
+        "index": result.kf_index,
+        "timestamps": result.kf_timestamps,
+        "poses_c2w": result.kf_poses_c2w,
+        "disps": result.kf_disps.astype(np.float32),
+        "intrinsics": np.asarray(result.intrinsics_work, dtype=np.float64),
+        "work_size": np.array(result.work_size, dtype=np.int64),
+        "images": result.kf_images,
+        "confidence": result.kf_confidence.astype(np.float16),
+    }
+    if result.kf_uncertainty is not None:
+        arrays["uncertainty"] = result.kf_uncertainty.astype(np.float32)
+        arrays["features"] = result.kf_features
+        arrays["theta"] = result.theta
+    return arrays
+
+
+def run_info(result, config: dict, backend: str, source: str, peak_mb: float) -> dict:
+    """The content of ``run.json``."""
+    import cv2
+    import torch
+
+    return {
+        "droidw": __version__,
+        "versions": {"python": platform.python_version(), "torch": torch.__version__, "opencv": cv2.__version__,
+                     "numpy": np.__version__},
+        "input": source,
+        "backend": backend,
+        "config": config,
+        "frames": int(len(result.timestamps)),
+        "keyframes": int(len(result.kf_index)),
+        "initialised": bool(result.initialised),
+        "calibration": {"fx": result.calibration.fx, "fy": result.calibration.fy,
+                        "cx": result.calibration.cx, "cy": result.calibration.cy},
+        "intrinsics_working": [float(v) for v in result.intrinsics_work],
+        "working_size": list(result.work_size),
+        "seconds_per_stage": result.timings,
+        "wall_seconds": round(result.wall_time, 3),
+        "fps": round(result.fps, 3),
+        "peak_memory_mb": round(peak_mb, 1),
+        "warnings": result.warnings,
+    }
+
+
+def write_run(out_dir: str | Path, result, info: dict) -> list[Path]:
+    """Write the run files into ``out_dir`` atomically; returns their paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".droidw-", dir=out))
+    try:
+        traj = Trajectory(result.timestamps, result.poses_c2w)
+        (tmp / "traj.txt").write_text(format_trajectory(traj, "tum"))
+        with open(tmp / "keyframes.npz", "wb") as fh:
+            np.savez_compressed(fh, **keyframe_arrays(result))
+        (tmp / "calib.txt").write_text(format_calibration(result.calibration))
+        (tmp / "run.json").write_text(json.dumps(info, indent=2, default=float) + "\n")
+        paths = []
+        for name in RUN_FILES:
+            os.replace(tmp / name, out / name)
+            paths.append(out / name)
+        return paths
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)

@@ -1,0 +1,84 @@
+"""The keyframe buffer: 1/8-resolution state per keyframe, in growable tensors.
+
+Per keyframe t it keeps the source frame index and timestamp, the pose G_t
+(world-to-camera, (7,)), the inverse depth d_t (h, w), optional features F_t
+(C, h, w, float16), an optional prior disparity D_t, and an RGB thumbnail.
+Nothing at the working resolution is kept here, so memory grows only with
+the number of keyframes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import Tensor
+
+
+class KeyframeBuffer:
+    """Growable storage for keyframe state (capacity doubles when full)."""
+
+    def __init__(self, grid: tuple[int, int], feature_channels: int = 0, feature_dtype=torch.float16, capacity: int = 64):
+        self.grid = grid
+        self.count = 0
+        h, w = grid
+        self.poses = torch.zeros(capacity, 7)
+        self.poses[:, 6] = 1.0
+        self.disps = torch.ones(capacity, h, w)
+        self.depth_prior = torch.zeros(capacity, h, w)
+        self.features = torch.zeros(capacity, feature_channels, h, w, dtype=feature_dtype) if feature_channels else None
+        self.frame_index: list[int] = []
+        self.timestamps: list[float] = []
+        self.thumbnails: list[np.ndarray] = []
+        self.has_prior = False
+
+    def __len__(self) -> int:
+        return self.count
+
+    def _grow(self) -> None:
+        def grown(t: Tensor, fill: float) -> Tensor:
+            extra = torch.full_like(t, fill)
+            return torch.cat([t, extra], 0)
+
+        new_poses = grown(self.poses, 0.0)
+        new_poses[self.poses.shape[0]:, 6] = 1.0
+        self.poses = new_poses
+        self.disps = grown(self.disps, 1.0)
+        self.depth_prior = grown(self.depth_prior, 0.0)
+        if self.features is not None:
+            self.features = grown(self.features, 0.0)
+
+    def append(self, frame_index: int, timestamp: float, pose: Tensor, disp: Tensor | float,
+               thumbnail: np.ndarray, features: Tensor | None = None, depth_prior: Tensor | None = None) -> int:
+        """Add a keyframe; returns its buffer index."""
+        if self.count == self.poses.shape[0]:
+            self._grow()
+        k = self.count
+        self.poses[k] = pose
+        self.disps[k] = disp
+        if features is not None and self.features is not None:
+            self.features[k] = features.to(self.features.dtype)
+        if depth_prior is not None:
+            self.depth_prior[k] = depth_prior
+            self.has_prior = True
+        self.frame_index.append(int(frame_index))
+        self.timestamps.append(float(timestamp))
+        self.thumbnails.append(thumbnail)
+        self.count += 1
+        return k
+
+    def remove_last(self) -> None:
+        """Drop the newest keyframe."""
+        if self.count == 0:
+            return
+        self.count -= 1
+        self.frame_index.pop()
+        self.timestamps.pop()
+        self.thumbnails.pop()
+        self.poses[self.count] = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
+        self.disps[self.count] = 1.0
+        self.depth_prior[self.count] = 0.0
+
+    def memory_bytes(self) -> int:
+        """Bytes held by the keyframe state (for run.json)."""
+        tensors = [self.poses, self.disps, self.depth_prior] + ([self.features] if self.features is not None else [])
+        return sum(t.numel() * t.element_size() for t in tensors) + sum(t.nbytes for t in self.thumbnails)

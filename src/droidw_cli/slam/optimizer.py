@@ -1,0 +1,76 @@
+"""Runs BA iterations on a window of the keyframe buffer through a backend.
+
+Each iteration interleaves (DROID-W §3.3) one gradient step on the
+uncertainty map θ (``uncertainty_step``) with one Gauss-Newton step on poses
+and disparities (``ba_step``).  The first ``warmup_iters`` iterations after
+initialisation run with the uncertainty weighting off, as in the official
+code, and θ is left untouched when ``optimize_theta`` is False (global BA).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from droidw_cli.ba.interface import BABackend
+from droidw_cli.ba.params import BAParams
+from droidw_cli.ba.types import BAState, EdgeSet
+from droidw_cli.slam.keyframes import KeyframeBuffer
+
+
+@dataclass
+class SharedState:
+    """State shared across windows: intrinsics on the 1/8 grid, θ, and the iteration counter."""
+
+    intrinsics: Tensor
+    theta: Tensor | None
+    iterations: int = 0
+
+
+def window_state(buffer: KeyframeBuffer, lo: int, hi: int, shared: SharedState, with_features: bool) -> BAState:
+    """A :class:`BAState` for keyframes [lo, hi) of the buffer (copies)."""
+    feats = buffer.features[lo:hi].float() if (with_features and buffer.features is not None) else None
+    return BAState(
+        poses=buffer.poses[lo:hi].clone(),
+        disps=buffer.disps[lo:hi].clone(),
+        intrinsics=shared.intrinsics.clone(),
+        features=feats,
+        theta=shared.theta.clone() if (feats is not None and shared.theta is not None) else None,
+        depth_prior=buffer.depth_prior[lo:hi].clone() if buffer.has_prior else None,
+    )
+
+
+def run_window(backend: BABackend, buffer: KeyframeBuffer, lo: int, hi: int, edges: EdgeSet, params: BAParams,
+               shared: SharedState, iters: int, fixed: int, optimize_theta: bool = True) -> float:
+    """Optimise keyframes [lo, hi) for ``iters`` iterations; the first ``fixed`` stay put.
+
+    Writes poses, disparities, intrinsics and θ back.  Returns the final cost.
+    """
+    unc = params.uncertainty
+    use_unc = unc.enable and buffer.features is not None and shared.theta is not None
+    state = window_state(buffer, lo, hi, shared, use_unc)
+    cost = float("nan")
+    for _ in range(iters):
+        weighted = use_unc and shared.iterations >= unc.warmup_iters
+        if weighted and optimize_theta:
+            state = state.with_(theta=backend.uncertainty_step(state, edges, params).theta)
+        step_params = dataclasses.replace(params, t0=fixed, uncertainty=dataclasses.replace(unc, enable=weighted))
+        result = backend.ba_step(state, edges, step_params)
+        state, cost = result.state, result.cost
+        shared.iterations += 1
+    buffer.poses[lo:hi] = state.poses
+    buffer.disps[lo:hi] = state.disps
+    shared.intrinsics = state.intrinsics.clone()
+    if state.theta is not None and optimize_theta:
+        shared.theta = state.theta.clone()
+    return cost
+
+
+def uncertainty_maps(features: Tensor, theta: Tensor, offset: float) -> Tensor:
+    """u = log(offset + exp(θ·F + b)) for (N, C, h, w) features → (N, h, w) (DROID-W Eq. 6)."""
+    f = features.float()
+    z = torch.einsum("nchw,c->nhw", f, theta[:-1]) + theta[-1]
+    return torch.log(offset + torch.exp(z))

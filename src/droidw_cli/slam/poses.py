@@ -1,0 +1,55 @@
+"""Pose utilities for the tracker, on pypose Lie groups.
+
+Poses are stored as (…, 7) tensors in pypose's SE3 layout
+``[tx, ty, tz, qx, qy, qz, qw]``; keyframe poses are world-to-camera G_t,
+outputs are camera-to-world G_t⁻¹.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pypose as pp
+import torch
+from torch import Tensor
+
+
+def identity(n: int = 1) -> Tensor:
+    """(n, 7) identity poses."""
+    out = torch.zeros(n, 7)
+    out[:, 6] = 1.0
+    return out
+
+
+def invert(poses: Tensor) -> Tensor:
+    """G⁻¹ for (…, 7) poses."""
+    return pp.SE3(poses).Inv().tensor()
+
+
+def compose(a: Tensor, b: Tensor) -> Tensor:
+    """a ∘ b for (…, 7) poses."""
+    return (pp.SE3(a) @ pp.SE3(b)).tensor()
+
+
+def to_matrix(poses: Tensor) -> np.ndarray:
+    """(N, 7) poses → (N, 4, 4) float64 matrices."""
+    return pp.SE3(poses.double()).matrix().numpy()
+
+
+def from_matrix(mats: np.ndarray) -> Tensor:
+    """(N, 4, 4) rigid transforms → (N, 7) float32 poses."""
+    return pp.mat2SE3(torch.as_tensor(mats, dtype=torch.float64), check=False).tensor().float()
+
+
+def extrapolate(prev: Tensor, last: Tensor, damping: float) -> Tensor:
+    """Damped constant velocity: G_new = Exp(damping · Log(G_last G_prev⁻¹)) G_last."""
+    rel = (pp.SE3(last) @ pp.SE3(prev).Inv()).Log()
+    return (pp.se3(damping * rel.tensor()).Exp() @ pp.SE3(last)).tensor()
+
+
+def interpolate(a: Tensor, b: Tensor, alpha: Tensor) -> Tensor:
+    """Geodesic SE(3) interpolation G(α) = Exp(α · Log(G_b G_a⁻¹)) G_a.
+
+    ``a``, ``b`` (N, 7) and ``alpha`` (N,) in [0, 1].
+    """
+    rel = (pp.SE3(b) @ pp.SE3(a).Inv()).Log().tensor()
+    return (pp.se3(alpha[:, None] * rel).Exp() @ pp.SE3(a)).tensor()

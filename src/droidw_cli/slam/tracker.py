@@ -1,0 +1,204 @@
+"""``droidw track``'s pipeline: frames in, a pose for every frame out.
+
+First pass: motion filter → keyframes → frontend (initialisation, window BA
+with uncertainty).  Then the global BA.  Second pass over the re-iterable
+source: the trajectory filler gives every frame a pose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from droidw_cli.ba.interface import BABackend
+from droidw_cli.config import TrackConfig
+from droidw_cli.errors import InputError
+from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics, unscale_intrinsics
+from droidw_cli.io.calibration import Calibration
+from droidw_cli.io.frames import FrameSource
+from droidw_cli.io.prepare import FramePreparer
+from droidw_cli.slam.backend import global_ba
+from droidw_cli.slam.filler import TrajectoryFiller
+from droidw_cli.slam.frontend import Frontend
+from droidw_cli.slam.motion_filter import MotionFilter
+from droidw_cli.slam.optimizer import uncertainty_maps
+from droidw_cli.slam.poses import invert, to_matrix
+from droidw_cli.slam.timing import StageTimer, Timed
+
+
+@dataclass
+class TrackResult:
+    """Everything a run produces (poses camera-to-world, keyframe state at 1/8 resolution)."""
+
+    timestamps: np.ndarray  # (N,) every input frame
+    poses_c2w: np.ndarray  # (N, 4, 4)
+    calibration: Calibration  # at the source resolution
+    intrinsics_work: np.ndarray  # (4,) at the working resolution
+    work_size: tuple[int, int]
+    kf_index: np.ndarray  # (K,) frame positions of keyframes
+    kf_timestamps: np.ndarray
+    kf_poses_c2w: np.ndarray  # (K, 4, 4)
+    kf_disps: np.ndarray  # (K, h, w)
+    kf_images: np.ndarray  # (K, H/s, W/s, 3) thumbnails
+    kf_uncertainty: np.ndarray | None  # (K, h, w)
+    kf_features: np.ndarray | None  # (K, C, h, w) float16
+    kf_confidence: np.ndarray  # (K, h, w) mean edge confidence of each pixel
+    theta: np.ndarray | None
+    initialised: bool
+    calibration_estimated: bool = False
+    timings: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    wall_time: float = 0.0
+
+    @property
+    def fps(self) -> float:
+        return len(self.timestamps) / self.wall_time if self.wall_time > 0 else float("nan")
+
+
+def _source_calibration(k_work: np.ndarray, preparer: FramePreparer) -> Calibration:
+    """Invert the preparer's resize + crop to express working intrinsics at the source resolution."""
+    (sh, sw), (rh, rw) = preparer.src_size, preparer.resized_size
+    sx, sy = rw / sw, rh / sh
+    oy, ox = preparer.offset
+    fx, fy, cx, cy = (float(v) for v in k_work)
+    return Calibration(fx / sx, fy / sy, (cx + ox + 0.5) / sx - 0.5, (cy + oy + 0.5) / sy - 0.5)
+
+
+def _confidence(frontend: Frontend) -> torch.Tensor:
+    """Per-keyframe mean confidence of its outgoing edges, (K, h, w)."""
+    buf = frontend.buffer
+    conf = torch.zeros(len(buf), *buf.grid)
+    count = torch.zeros(len(buf))
+    for (i, _), (_, w) in frontend.cache.targets.items():
+        conf[i] += w[..., 0].float()
+        count[i] += 1
+    return conf / count.clamp(min=1)[:, None, None]
+
+
+class Tracker:
+    """Runs the two passes of the pipeline over one frame source."""
+
+    def __init__(self, cfg: TrackConfig, backend: BABackend, correspondence, features=None, progress: bool = True):
+        self.cfg = cfg
+        self.backend = backend
+        self.correspondence = correspondence
+        self.features = features if cfg.uncertainty.enable else None
+        self.progress = progress
+        self.timer = StageTimer()
+
+    def run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
+        cfg, timer = self.cfg, self.timer
+        t_start = time.perf_counter()
+        collected: list[str] = []
+        h_src, w_src = source.size
+        auto = calibration is None
+        if auto:
+            f = cfg.calib.focal_init * max(h_src, w_src)
+            calibration = Calibration(f, f, (w_src - 1) / 2.0, (h_src - 1) / 2.0)
+        preparer = FramePreparer(source.size, calibration.as_array(), cfg.io.target_area,
+                                 calibration.distortion if calibration.has_distortion else None)
+        hw = preparer.size
+        grid = (hw[0] // BA_SCALE, hw[1] // BA_SCALE)
+        k8 = torch.tensor(scale_intrinsics(np.asarray(preparer.intrinsics, dtype=np.float64), BA_SCALE), dtype=torch.float32)
+        params = dataclasses.replace(cfg.ba, optimize_focal="shared") if auto else cfg.ba
+        backend = Timed(self.backend, timer, "ba", ("ba_step", "uncertainty_step", "reproject"))
+        corr = Timed(self.correspondence, timer, "flow", ("match",))
+        channels = self.features.channels if self.features is not None else 0
+        fe = Frontend(cfg, params, backend, corr, grid, k8, channels)
+        mfilter = MotionFilter(cfg.motion_filter)
+        frames: list[tuple[int, float]] = []
+        s = cfg.io.thumbnail_scale
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            bar = tqdm(total=len(source), desc="track", unit="frame", disable=not self.progress, dynamic_ncols=True)
+            it = iter(source)
+            while True:
+                with timer("decode"):
+                    frame = next(it, None)
+                    if frame is None:
+                        break
+                    image, depth = preparer(frame.image, frame.depth)
+                frames.append((frame.index, frame.timestamp))
+                with timer("motion_filter"):
+                    is_kf, _ = mfilter.check(image, fe.initialised)
+                if is_kf:
+                    feats = None
+                    if self.features is not None:
+                        with timer("features"):
+                            x = torch.from_numpy(image).permute(2, 0, 1)[None].float() / 255.0
+                            feats = self.features.extract(x)[0]
+                    prior = None
+                    if cfg.io.use_depth and depth is not None:
+                        d8 = cv2.resize(depth, (grid[1], grid[0]), interpolation=cv2.INTER_NEAREST)
+                        prior = torch.from_numpy(np.where(d8 > 0.1, 1.0 / np.maximum(d8, 1e-6), 0.0).astype(np.float32))
+                    thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
+                    fe.add_keyframe(frame.index, frame.timestamp, image, thumb, feats, prior)
+                    mfilter.accept(image)
+                bar.update(1)
+                bar.set_postfix(kf=len(fe.buffer), refresh=False)
+            bar.close()
+
+            if not frames:
+                raise InputError(f"{source.path}: no decodable frames")
+            if not fe.initialised:
+                collected.append(
+                    f"too little parallax to build a map ({len(fe.buffer)} keyframe(s) of the {cfg.frontend.warmup} "
+                    "needed): the camera barely moved, so the trajectory stays at the identity"
+                )
+            with timer("global_ba"):
+                global_ba(fe, cfg.backend)
+
+            filler = TrajectoryFiller(fe, cfg.filler.iters)
+            with timer("filler"):
+                if fe.initialised:
+                    bar = tqdm(total=len(frames), desc="fill", unit="frame", disable=not self.progress, dynamic_ncols=True)
+                    for frame in source:
+                        image, _ = preparer(frame.image, None)
+                        filler.push(frame.index, frame.timestamp, image)
+                        bar.update(1)
+                    bar.close()
+                    poses_w2c = filler.finish()
+                else:
+                    poses_w2c = {}
+            collected += [str(w.message) for w in caught if not issubclass(w.category, DeprecationWarning)]
+
+        ident = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
+        w2c = torch.stack([poses_w2c.get(idx, ident) for idx, _ in frames])
+        buf = fe.buffer
+        n_kf = len(buf)
+        k_work = unscale_intrinsics(fe.shared.intrinsics.numpy().astype(np.float64), BA_SCALE)
+        unc = feats_np = theta = None
+        if buf.features is not None and fe.shared.theta is not None:
+            unc = uncertainty_maps(buf.features[:n_kf], fe.shared.theta, cfg.uncertainty.softplus_offset).numpy()
+            feats_np = buf.features[:n_kf].to(torch.float16).numpy()
+            theta = fe.shared.theta.numpy().copy()
+        wall = time.perf_counter() - t_start
+        return TrackResult(
+            timestamps=np.array([t for _, t in frames], dtype=np.float64),
+            poses_c2w=to_matrix(invert(w2c)),
+            calibration=_source_calibration(k_work, preparer),
+            intrinsics_work=k_work,
+            work_size=hw,
+            kf_index=np.array(buf.frame_index, dtype=np.int64),
+            kf_timestamps=np.array(buf.timestamps, dtype=np.float64),
+            kf_poses_c2w=to_matrix(invert(buf.poses[:n_kf])) if n_kf else np.zeros((0, 4, 4)),
+            kf_disps=buf.disps[:n_kf].numpy().copy(),
+            kf_images=np.stack(buf.thumbnails) if n_kf else np.zeros((0, 1, 1, 3), np.uint8),
+            kf_uncertainty=unc,
+            kf_features=feats_np,
+            kf_confidence=_confidence(fe).numpy(),
+            theta=theta,
+            initialised=fe.initialised,
+            calibration_estimated=auto,
+            timings=timer.as_dict(),
+            warnings=list(dict.fromkeys(collected)),
+            wall_time=wall,
+        )
