@@ -1,0 +1,60 @@
+"""PLY export: multi-view agreement, static/dynamic split, readable files."""
+
+import numpy as np
+import pytest
+
+from droidw_cli.export.pointcloud import CloudParams, build_cloud, multiview_support, write_ply
+from droidw_cli.geometry.camera import BA_SCALE, unscale_intrinsics
+
+
+def _plane_run(num_kf=5, h=12, w=16, mover=True):
+    """Keyframes translating along x, looking at a fronto-parallel plane at z = 2 m."""
+    k8 = np.array([12.0, 12.0, (w - 1) / 2, (h - 1) / 2])
+    poses = np.tile(np.eye(4), (num_kf, 1, 1))
+    poses[:, 0, 3] = 0.05 * np.arange(num_kf)
+    disps = np.full((num_kf, h, w), 0.5, np.float32)
+    unc = np.full((num_kf, h, w), 0.3, np.float32)
+    if mover:  # a block that floats at 1 m in keyframe 2 only: no neighbour agrees with it
+        disps[2, 4:8, 6:10] = 1.0
+        unc[2, 4:8, 6:10] = 2.0
+    return {
+        "disps": disps, "poses_c2w": poses, "intrinsics": unscale_intrinsics(k8, BA_SCALE),
+        "images": np.full((num_kf, h * 2, w * 2, 3), 128, np.uint8), "timestamps": np.arange(num_kf) * 0.1,
+        "uncertainty": unc,
+    }
+
+
+def test_multiview_support_counts_agreeing_neighbours():
+    run = _plane_run()
+    k8 = np.array([12.0, 12.0, 7.5, 5.5])
+    support = multiview_support(run["disps"], run["poses_c2w"], k8, radius=2, rel_tol=0.05)
+    assert support[2, 5, 7] == 0  # the floating block: nobody agrees
+    assert support[2, 6, 3] >= 3  # plane pixels of the middle keyframe agree with ≥ 3 of 4 neighbours
+    assert support[0, 6, 12] >= 1
+
+
+def test_static_cloud_excludes_mover_and_ply_is_readable(tmp_path):
+    plyfile = pytest.importorskip("plyfile")
+    cloud = build_cloud(_plane_run(), CloudParams())
+    static = cloud.select(cloud.static)
+    dynamic = cloud.select(~cloud.static)
+    assert len(static.xyz) > 0
+    assert np.all(np.abs(static.xyz[:, 2] - 2.0) < 1e-3)  # only plane points
+    assert np.any(np.abs(dynamic.xyz[:, 2] - 1.0) < 1e-3)  # the block is dynamic
+    n = write_ply(tmp_path / "static.ply", static, with_time=False)
+    m = write_ply(tmp_path / "dynamic.ply", dynamic, with_time=True)
+    data = plyfile.PlyData.read(str(tmp_path / "static.ply"))
+    assert data["vertex"].count == n == len(static.xyz)
+    np.testing.assert_allclose(data["vertex"]["z"], static.xyz[:, 2])
+    dyn = plyfile.PlyData.read(str(tmp_path / "dynamic.ply"))
+    assert dyn["vertex"].count == m
+    assert set(np.unique(dyn["vertex"]["time"])) <= {0.0, 0.1, 0.2, 0.30000000000000004, 0.4}
+
+
+def test_stride_and_no_partial_file(tmp_path):
+    full = build_cloud(_plane_run(mover=False), CloudParams(stride=1))
+    half = build_cloud(_plane_run(mover=False), CloudParams(stride=2))
+    assert len(half.xyz) == 3 * 12 * 16 and len(full.xyz) == 5 * 12 * 16
+    target = tmp_path / "sub" / "x.ply"
+    write_ply(target, full, with_time=False)
+    assert target.is_file() and not list(target.parent.glob(".*tmp"))
