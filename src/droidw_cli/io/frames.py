@@ -1,0 +1,211 @@
+"""Frame sources: one streaming, re-iterable interface over videos and image sequences.
+
+``open_source(path)`` picks the source from the path:
+
+========================================  ====================================
+path                                      source
+========================================  ====================================
+``*.mp4 / .avi / .mov / .mkv`` (+ m4v,    :class:`~droidw_cli.io.sources.VideoSource`
+webm, mpg, mpeg, wmv)
+folder with ``rgb.txt`` (or that file)    :class:`~droidw_cli.io.datasets.TumRgbdSource`
+                                          (TUM / Bonn RGB-D)
+EuRoC root, ``mav0`` or ``mav0/cam0``     :class:`~droidw_cli.io.datasets.EurocSource`
+any other folder of jpg/png/bmp/tif       :class:`~droidw_cli.io.sources.ImageFolderSource`
+========================================  ====================================
+
+Every source yields :class:`Frame` objects one at a time (memory stays
+bounded), and ``iter(source)`` can be called again: each call reopens the
+data, so a second pass (the trajectory filler) sees the same frames.
+
+Selection: raw frames ``start, start + stride, …`` are kept, at most
+``max_frames`` of them (0 = all).  ``Frame.index`` is the position in that
+selection (0, 1, 2, …), so the raw index is ``start + index · stride``.
+A corrupt frame is skipped with a :class:`CorruptFrameWarning`; the indices
+of the other frames do not change (a gap is left).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from droidw_cli.errors import ConfigError, InputError
+
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".m4v", ".webm", ".mpg", ".mpeg", ".wmv")
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
+
+
+class CorruptFrameWarning(UserWarning):
+    """A frame could not be decoded and was skipped."""
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """One frame: selection index, time in seconds, RGB image and optional metric depth.
+
+    ``image`` is H×W×3 uint8 RGB; ``depth`` is H×W float32 metres (0 = invalid) or None.
+    """
+
+    index: int
+    timestamp: float
+    image: np.ndarray
+    depth: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Which raw frames a source yields: ``start, start + stride, …``, at most ``max_frames`` (0 = all)."""
+
+    stride: int = 1
+    start: int = 0
+    max_frames: int = 0
+
+    def __post_init__(self) -> None:
+        if int(self.stride) != self.stride or self.stride < 1:
+            raise ConfigError(f"stride must be an integer ≥ 1, got {self.stride}")
+        if int(self.start) != self.start or self.start < 0:
+            raise ConfigError(f"start must be an integer ≥ 0, got {self.start}")
+        if int(self.max_frames) != self.max_frames or self.max_frames < 0:
+            raise ConfigError(f"max_frames must be an integer ≥ 0 (0 = all), got {self.max_frames}")
+
+    def count(self, n_raw: int) -> int:
+        """Number of selected frames out of ``n_raw`` raw frames."""
+        n = len(range(self.start, max(n_raw, 0), self.stride))
+        return min(n, self.max_frames) if self.max_frames else n
+
+    def indices(self, n_raw: int) -> range:
+        """Raw indices selected out of ``n_raw`` raw frames."""
+        return range(self.start, self.start + self.count(n_raw) * self.stride, self.stride)
+
+    def position(self, raw: int) -> int | None:
+        """Selection index of raw frame ``raw``, or None if it is not selected (ignores max_frames)."""
+        if raw < self.start or (raw - self.start) % self.stride:
+            return None
+        return (raw - self.start) // self.stride
+
+
+def check_fps(fps: float) -> float:
+    """``fps`` as a float; ConfigError unless it is a positive finite number."""
+    try:
+        value = float(fps)
+    except (TypeError, ValueError):
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"fps must be a positive number, got {fps}")
+    return value
+
+
+def warn_corrupt(message: str) -> None:
+    warnings.warn(message, CorruptFrameWarning, stacklevel=3)
+
+
+def decode_rgb(path: Path) -> np.ndarray | None:
+    """Read an image file as H×W×3 uint8 RGB (grey and 16-bit images are converted); None if undecodable."""
+    import cv2
+
+    try:
+        data = np.fromfile(str(path), dtype=np.uint8)
+    except OSError:
+        return None
+    if data.size == 0:
+        return None
+    bgr = cv2.imdecode(data, cv2.IMREAD_COLOR)
+    if bgr is None or bgr.ndim != 3 or bgr.shape[2] != 3:
+        return None
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def decode_depth(path: Path, scale: float) -> np.ndarray | None:
+    """Read a uint16 depth PNG as float32 metres (value / scale; 0 stays 0 = invalid); None if undecodable."""
+    import cv2
+
+    try:
+        data = np.fromfile(str(path), dtype=np.uint8)
+    except OSError:
+        return None
+    if data.size == 0:
+        return None
+    raw = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    if raw is None or raw.ndim != 2:
+        return None
+    return (raw.astype(np.float32) / np.float32(scale)).astype(np.float32)
+
+
+class FrameSource(ABC):
+    """A re-iterable stream of :class:`Frame`.
+
+    Attributes: ``name`` (for messages and output names), ``size`` = (H, W) of
+    the raw frames, ``intrinsics_hint`` (a :class:`~droidw_cli.io.calibration.Calibration`
+    found with the data, or None), ``fps`` (the frame rate used for index-based
+    timestamps).  ``len(source)`` is the number of frames iteration yields
+    (for videos: computed from the container's frame count, see VideoSource).
+    """
+
+    name: str
+    size: tuple[int, int]
+    intrinsics_hint = None
+    fps: float
+
+    def __init__(self, path: Path, selection: Selection, fps: float) -> None:
+        self.path = Path(path)
+        self.selection = selection
+        self.fps = check_fps(fps)
+        self.name = self.path.stem if self.path.is_file() else self.path.resolve().name
+
+    @abstractmethod
+    def __len__(self) -> int: ...
+
+    @abstractmethod
+    def __iter__(self) -> Iterator[Frame]: ...
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({str(self.path)!r}, frames={len(self)}, size={self.size})"
+
+
+def _check_nonempty(source: FrameSource) -> FrameSource:
+    if len(source) == 0:
+        sel = source.selection
+        raise InputError(f"{source.path}: no frames left after start={sel.start}, stride={sel.stride}, max_frames={sel.max_frames}")
+    return source
+
+
+def open_source(path: str | Path, *, stride: int = 1, start: int = 0, max_frames: int = 0, fps: float = 30.0) -> FrameSource:
+    """Open a video, image folder, TUM/Bonn RGB-D folder or EuRoC sequence (detected from ``path``).
+
+    ``fps`` is used for timestamps when the data has none (image folders
+    without timestamp names, videos that report no frame rate).  Raises
+    :class:`InputError` for a missing path, an unknown file type, an empty
+    folder or an unreadable video, and when the selection is empty.
+    """
+    from droidw_cli.io.datasets import EurocSource, TumRgbdSource, find_euroc_cam
+    from droidw_cli.io.sources import ImageFolderSource, VideoSource
+
+    sel = Selection(stride=stride, start=start, max_frames=max_frames)
+    fps = check_fps(fps)
+    p = Path(path).expanduser()
+    if not p.exists():
+        raise InputError(f"{p}: no such file or folder")
+    if p.is_file():
+        suffix = p.suffix.lower()
+        if suffix in VIDEO_SUFFIXES:
+            return _check_nonempty(VideoSource(p, sel, fps))
+        if p.name == "rgb.txt":
+            return _check_nonempty(TumRgbdSource(p.parent, sel, fps))
+        if suffix in IMAGE_SUFFIXES:
+            raise InputError(f"{p}: a single image is not a sequence; pass the folder that holds the images")
+        raise InputError(f"{p}: unknown input type {suffix or '(no suffix)'!r}; expected a video "
+                         f"({', '.join(VIDEO_SUFFIXES)}) or a folder of images")
+    if not p.is_dir():
+        raise InputError(f"{p}: not a file or folder")
+    if (p / "rgb.txt").is_file():
+        return _check_nonempty(TumRgbdSource(p, sel, fps))
+    cam = find_euroc_cam(p)
+    if cam is not None:
+        return _check_nonempty(EurocSource(cam, sel, fps))
+    return _check_nonempty(ImageFolderSource(p, sel, fps))
