@@ -204,7 +204,7 @@ def detect_format(path: str | Path) -> str:
     with open(path, encoding="utf-8", errors="replace") as fh:
         for line in fh:
             s = line.strip()
-            if not s or s.startswith("#"):
+            if not s or s.startswith(("#", "%")):
                 continue
             n = len(s.replace(",", " ").split())
             if n == 8:

@@ -1,0 +1,66 @@
+"""``droidw eval``: ATE (and optionally RPE) of a trajectory against ground truth."""
+
+from __future__ import annotations
+
+import json
+
+import click
+
+FORMAT_CHOICES = click.Choice(["auto", "tum", "kitti", "euroc"], case_sensitive=False)
+
+
+@click.command("eval")
+@click.option("--gt", "gt_path", required=True, metavar="FILE", help="Ground-truth trajectory (TUM, KITTI or EuRoC CSV).")
+@click.option("--est", "est_path", default="traj.txt", show_default=True, metavar="FILE|RUN",
+              help="Estimated trajectory, or a run folder containing traj.txt.")
+@click.option("--align", type=click.Choice(["sim3", "se3", "none"]), default="sim3", show_default=True,
+              help="Umeyama alignment before measuring: sim3 (with scale, for monocular), se3 or none.")
+@click.option("--max-diff", type=click.FloatRange(min=0.0), default=0.02, show_default=True, metavar="SECONDS",
+              help="Largest timestamp difference for associating poses (nearest timestamp).")
+@click.option("--t-offset", type=float, default=0.0, show_default=True, metavar="SECONDS",
+              help="Offset added to the estimate's timestamps before associating.")
+@click.option("--format", "fmt", type=FORMAT_CHOICES, default="auto", show_default=True,
+              help="Format of the estimate (and of the ground truth unless --gt-format is given).")
+@click.option("--gt-format", type=FORMAT_CHOICES, default=None, help="Format of the ground truth.")
+@click.option("--gt-times", type=str, default=None, metavar="FILE", help="Timestamps for a KITTI ground truth.")
+@click.option("--est-times", type=str, default=None, metavar="FILE", help="Timestamps for a KITTI estimate.")
+@click.option("--rpe", "rpe_delta", type=click.IntRange(min=1), default=None, metavar="DELTA",
+              help="Also report the translational RPE over pose pairs DELTA matched frames apart.")
+@click.option("--plot", "plot_path", type=str, default=None, metavar="PNG",
+              help="Write a top view of both trajectories after alignment.")
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of the table.")
+def evaluate(gt_path: str, est_path: str, align: str, max_diff: float, t_offset: float, fmt: str,
+             gt_format: str | None, gt_times: str | None, est_times: str | None, rpe_delta: int | None,
+             plot_path: str | None, as_json: bool) -> None:
+    """Evaluate an estimated trajectory against ground truth: ATE after Umeyama alignment.
+
+    KITTI files carry no timestamps: two KITTI files are paired by index, or
+    give --gt-times / --est-times.
+
+    \b
+    Examples:
+      droidw eval --gt groundtruth.txt --est run/
+      droidw eval --gt gt.csv --est traj.txt --align se3 --rpe 10 --plot top.png
+      droidw eval --gt KITTI_00_gt.txt --est KITTI_00_ORB.txt --json
+    """
+    from droidw_cli.eval import inputs
+    from droidw_cli.eval.metrics import evaluate_ate, evaluate_rpe
+    from droidw_cli.eval.report import EvalInfo, format_text, plot_top_view, to_json_dict
+
+    fmt = fmt.lower()
+    gt = inputs.load(gt_path, (gt_format or fmt).lower(), gt_times, role="gt")
+    est = inputs.load(inputs.resolve_estimate_path(est_path), fmt, est_times, role="est")
+    by_index = inputs.pairing_by_index(gt, est)
+    ate = evaluate_ate(gt.traj, est.traj, align, max_diff, offset=t_offset, by_index=by_index)
+    rpe = evaluate_rpe(gt.traj, est.traj, ate, rpe_delta) if rpe_delta is not None else None
+    info = EvalInfo(str(gt.path), str(est.path), len(gt.traj), len(est.traj), max_diff, by_index)
+    if plot_path is not None:
+        plot_top_view(plot_path, gt.traj, est.traj, ate)
+    if as_json:
+        out = to_json_dict(info, ate, rpe)
+        out["plot"] = plot_path
+        click.echo(json.dumps(out))
+        return
+    click.echo(format_text(info, ate, rpe))
+    if plot_path is not None:
+        click.echo(f"\nplot written to {plot_path}")

@@ -1,0 +1,176 @@
+"""``droidw eval`` on synthetic trajectory files."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from droidw_cli.cli import main
+from droidw_cli.eval import evaluate_ate, evaluate_rpe
+from droidw_cli.io.trajectory import Trajectory, read_trajectory, write_trajectory
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def synthetic_pair(n: int = 120, seed: int = 0) -> tuple[Trajectory, Trajectory]:
+    """A smooth ground truth at 30 Hz and a scaled, rotated, noisy estimate with the same stamps."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / 30.0
+    pos = np.c_[np.sin(0.9 * t), 0.5 * np.cos(0.6 * t), 0.2 * t]
+    gt = np.tile(np.eye(4), (n, 1, 1))
+    gt[:, :3, 3] = pos
+    c, s = np.cos(0.4), np.sin(0.4)
+    r = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    est = gt.copy()
+    est[:, :3, :3] = r
+    est[:, :3, 3] = 0.5 * pos @ r.T + [1.0, 2.0, 3.0] + rng.normal(scale=0.002, size=pos.shape)
+    stamps = 1305031102.0 + np.round(t, 6)
+    return Trajectory(stamps, gt), Trajectory(stamps.copy(), est)
+
+
+@pytest.fixture
+def files(tmp_path):
+    gt, est = synthetic_pair()
+    write_trajectory(tmp_path / "gt.txt", gt, "tum")
+    write_trajectory(tmp_path / "est.txt", est, "tum")
+    return tmp_path
+
+
+def run(argv, capsys) -> tuple[int, str, str]:
+    try:
+        main(argv)
+        code = 0
+    except SystemExit as exc:
+        code = exc.code
+    cap = capsys.readouterr()
+    return code, cap.out, cap.err
+
+
+def expected(files, align="sim3"):
+    return evaluate_ate(read_trajectory(files / "gt.txt"), read_trajectory(files / "est.txt"), align)
+
+
+def test_text_output_contains_rmse_matches_and_scale(files, capsys):
+    code, out, err = run(["eval", "--gt", str(files / "gt.txt"), "--est", str(files / "est.txt")], capsys)
+    assert code == 0, err
+    ref = expected(files)
+    assert f"rmse    {ref.rmse:.6f}" in out
+    assert "matched       120 poses" in out
+    assert f"scale         {ref.scale:.6f}" in out
+    assert ref.scale == pytest.approx(2.0, rel=0.01)
+
+
+def test_json_output_parses_and_has_rpe(files, capsys):
+    argv = ["eval", "--gt", str(files / "gt.txt"), "--est", str(files / "est.txt"), "--json", "--rpe", "4",
+            "--align", "se3"]
+    code, out, _ = run(argv, capsys)
+    assert code == 0
+    data = json.loads(out)
+    ref = expected(files, "se3")
+    assert data["ate"]["rmse"] == pytest.approx(ref.rmse, rel=1e-12)
+    assert data["matches"] == 120 and data["align"] == "se3" and data["scale"] == 1.0
+    rpe = evaluate_rpe(read_trajectory(files / "gt.txt"), read_trajectory(files / "est.txt"), ref, 4)
+    assert data["rpe"]["delta"] == 4 and data["rpe"]["pairs"] == rpe.stats.count == 29
+    assert data["rpe"]["rmse"] == pytest.approx(rpe.stats.rmse, rel=1e-12)
+    assert np.allclose(np.array(data["rotation"]) @ np.array(data["rotation"]).T, np.eye(3))
+
+
+def test_plot_writes_a_png_atomically(files, capsys):
+    png = files / "plots" / "top.png"
+    code, out, _ = run(["eval", "--gt", str(files / "gt.txt"), "--est", str(files / "est.txt"), "--plot", str(png)],
+                       capsys)
+    assert code == 0
+    assert png.read_bytes()[:8] == PNG_MAGIC
+    assert png.stat().st_size > 5000
+    assert sorted(p.name for p in png.parent.iterdir()) == ["top.png"]
+    assert str(png) in out
+
+
+def test_run_folder_and_default_est(files, capsys, monkeypatch):
+    run_dir = files / "run"
+    run_dir.mkdir()
+    (run_dir / "traj.txt").write_text((files / "est.txt").read_text())
+    code, out, _ = run(["eval", "--gt", str(files / "gt.txt"), "--est", str(run_dir), "--json"], capsys)
+    assert code == 0
+    assert json.loads(out)["est"] == str(run_dir / "traj.txt")
+    monkeypatch.chdir(run_dir)
+    code, out, _ = run(["eval", "--gt", str(files / "gt.txt"), "--json"], capsys)
+    assert code == 0
+    data = json.loads(out)
+    assert data["est"] == "traj.txt"
+    assert data["ate"]["rmse"] == pytest.approx(expected(files).rmse, rel=1e-12)
+
+
+def test_kitti_pairs_by_index_and_euroc_gt(files, capsys):
+    gt, est = synthetic_pair()
+    write_trajectory(files / "gt_kitti.txt", gt, "kitti")
+    write_trajectory(files / "est_kitti.txt", est, "kitti")
+    write_trajectory(files / "gt.csv", gt, "euroc")
+    code, out, _ = run(["eval", "--gt", str(files / "gt_kitti.txt"), "--est", str(files / "est_kitti.txt"), "--json"],
+                       capsys)
+    assert code == 0
+    data = json.loads(out)
+    assert data["association"] == "index" and data["matches"] == 120
+    assert data["ate"]["rmse"] == pytest.approx(expected(files).rmse, rel=1e-6)
+    code, out, _ = run(["eval", "--gt", str(files / "gt.csv"), "--est", str(files / "est.txt"), "--json"], capsys)
+    assert code == 0
+    assert json.loads(out)["ate"]["rmse"] == pytest.approx(expected(files).rmse, rel=1e-6)
+    # a KITTI estimate against a timestamped ground truth needs its times
+    code, _, err = run(["eval", "--gt", str(files / "gt.txt"), "--est", str(files / "est_kitti.txt")], capsys)
+    assert code == 2 and "--est-times" in err
+    (files / "times.txt").write_text("\n".join(f"{v:.6f}" for v in est.timestamps) + "\n")
+    code, out, _ = run(["eval", "--gt", str(files / "gt.txt"), "--est", str(files / "est_kitti.txt"),
+                        "--est-times", str(files / "times.txt"), "--json"], capsys)
+    assert code == 0 and json.loads(out)["association"] == "timestamp"
+
+
+def write_est(files, name, stamps, positions):
+    poses = np.tile(np.eye(4), (len(stamps), 1, 1))
+    poses[:, :3, 3] = positions
+    write_trajectory(files / name, Trajectory(np.asarray(stamps, dtype=float), poses), "tum")
+    return str(files / name)
+
+
+def assert_one_line_error(code, out, err, fragment):
+    assert code == 2
+    assert out == ""
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("droidw: error:")
+    assert fragment in lines[0]
+
+
+def test_errors_exit_2_with_one_line(files, capsys):
+    gt = str(files / "gt.txt")
+    t0 = 1305031102.0
+    code, out, err = run(["eval", "--gt", str(files / "missing.txt"), "--est", str(files / "est.txt")], capsys)
+    assert_one_line_error(code, out, err, "not found")
+    code, out, err = run(["eval", "--gt", gt, "--est", str(files / "nope")], capsys)
+    assert_one_line_error(code, out, err, "not found")
+    late = write_est(files, "late.txt", t0 + 500 + np.arange(10.0), np.random.default_rng(0).normal(size=(10, 3)))
+    code, out, err = run(["eval", "--gt", gt, "--est", late], capsys)
+    assert_one_line_error(code, out, err, "no overlapping timestamps")
+    two = write_est(files, "two.txt", t0 + np.array([0.0, 1.0]), [[0, 0, 0], [1, 0, 0]])
+    code, out, err = run(["eval", "--gt", gt, "--est", two], capsys)
+    assert_one_line_error(code, out, err, "at least 3")
+    line = write_est(files, "line.txt", t0 + np.round(np.arange(20) / 30.0, 6), np.outer(np.arange(20.0), [1, 1, 0]))
+    code, out, err = run(["eval", "--gt", gt, "--est", line], capsys)
+    assert_one_line_error(code, out, err, "collinear")
+    (files / "bad.txt").write_text("1305031102.0 0 0 0 0 0 0 1\n1305031102.1 0 x 0 0 0 0 1\n")
+    code, out, err = run(["eval", "--gt", gt, "--est", str(files / "bad.txt")], capsys)
+    assert_one_line_error(code, out, err, f"{files / 'bad.txt'}:2")
+
+
+def test_max_diff_controls_matching(files, capsys):
+    gt, est = synthetic_pair()
+    shifted = Trajectory(est.timestamps + 0.01, est.poses)
+    write_trajectory(files / "shifted.txt", shifted, "tum")
+    argv = ["eval", "--gt", str(files / "gt.txt"), "--est", str(files / "shifted.txt"), "--json"]
+    code, out, _ = run(argv + ["--max-diff", "0.02"], capsys)
+    assert code == 0 and json.loads(out)["matches"] == 120
+    code, _, err = run(argv + ["--max-diff", "0.005"], capsys)
+    assert code == 2 and "no overlapping timestamps" in err
+    code, out, _ = run(argv + ["--max-diff", "0.005", "--t-offset", "-0.01"], capsys)
+    assert code == 0 and json.loads(out)["matches"] == 120
