@@ -1,0 +1,90 @@
+"""The correspondence-source interface.
+
+A correspondence source gives, for a directed edge (i, j) of the frame
+graph, the dense target p*_ij (where each 1/8-grid cell of frame i lands in
+frame j, in grid coordinates of frame j) and a confidence w_ij ∈ [0, 1].
+droidw's built-in source is classical optical flow (OpenCV DIS); a plugin
+implementing :class:`CorrespondenceSource` can replace it (registered under
+the ``droidw.correspondence`` entry-point group).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from droidw_cli.correspondence.grid import validate_image
+
+
+@dataclass(frozen=True)
+class Correspondence:
+    """Dense correspondence of one directed edge i → j.
+
+    Attributes:
+        flow: (H, W, 2) float32 numpy, full-resolution flow i → j (x, y in px).
+        target: (H/8, W/8, 2) float32 tensor, p*_ij = g + f̄/8 in 1/8-grid
+            coordinates of frame j (see :mod:`droidw_cli.correspondence.grid`).
+        weight: (H/8, W/8, 2) float32 tensor in [0, 1]; both channels equal.
+    """
+
+    flow: np.ndarray
+    target: torch.Tensor
+    weight: torch.Tensor
+
+    @property
+    def mean_flow(self) -> float:
+        """Mean flow magnitude over all pixels, full-resolution px."""
+        return float(np.linalg.norm(self.flow, axis=-1).mean())
+
+
+class CorrespondenceSource(ABC):
+    """Dense targets and confidences between two frames."""
+
+    name: str = ""
+
+    @abstractmethod
+    def match(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None = None) -> Correspondence:
+        """Correspondence i → j.
+
+        Args:
+            image_i, image_j: (H, W, 3) uint8 RGB at the working resolution,
+                H and W multiples of 8.
+            init_flow: optional (H, W, 2) float32 full-resolution flow i → j to
+                start from (e.g. induced by the current poses and depths).
+        """
+
+    def mean_flow(self, image_i: np.ndarray, image_j: np.ndarray) -> float:
+        """A cheap estimate of the mean flow magnitude i → j in full-res px (for the motion filter).
+
+        The default runs :meth:`match`; sources override it with something cheaper.
+        """
+        return self.match(image_i, image_j).mean_flow
+
+    def match_many(
+        self,
+        pairs: Sequence[tuple[np.ndarray, np.ndarray]],
+        init_flows: Sequence[np.ndarray | None] | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Targets and weights of several edges, stacked as (E, H/8, W/8, 2) each.
+
+        Args:
+            pairs: (image_i, image_j) per edge, all of the same size.
+            init_flows: None, or one optional initial flow per edge.
+        """
+        if len(pairs) == 0:
+            raise ValueError("match_many needs at least one pair")
+        if init_flows is not None and len(init_flows) != len(pairs):
+            raise ValueError(f"got {len(init_flows)} init_flows for {len(pairs)} pairs")
+        shape = validate_image(pairs[0][0], "image_i").shape[:2]
+        targets, weights = [], []
+        for k, (image_i, image_j) in enumerate(pairs):
+            if image_i.shape[:2] != shape or image_j.shape[:2] != shape:
+                raise ValueError(f"pair {k} has size {image_i.shape[:2]}/{image_j.shape[:2]}, expected {shape}")
+            corr = self.match(image_i, image_j, None if init_flows is None else init_flows[k])
+            targets.append(corr.target)
+            weights.append(corr.weight)
+        return torch.stack(targets), torch.stack(weights)

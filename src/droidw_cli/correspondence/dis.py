@@ -1,0 +1,97 @@
+"""Correspondences from OpenCV's DIS optical flow (Kroeger et al., ECCV 2016).
+
+``match`` runs DIS i → j and j → i on grayscale images, scores each pixel
+(:mod:`droidw_cli.correspondence.confidence`) and brings flow and weight to
+the 1/8 grid by block averaging (:mod:`droidw_cli.correspondence.grid`).
+With ``init_flow`` the forward pass starts from it and the backward pass
+from its approximate inverse; DIS uses a passed-in float32 (H, W, 2) flow as
+its initialisation, which makes ~100 px motions recoverable.
+
+DIS is deterministic, also across thread counts (its spatial propagation
+uses a fixed number of stripes).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import torch
+
+from droidw_cli.config import CorrespondenceConfig
+from droidw_cli.correspondence.base import Correspondence, CorrespondenceSource
+from droidw_cli.correspondence.confidence import flow_confidence, invert_flow
+from droidw_cli.correspondence.grid import area_downsample, flow_to_target, validate_flow, validate_image
+from droidw_cli.errors import ConfigError
+
+PRESETS = {
+    "ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
+    "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
+    "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,
+}
+# mean_flow runs FAST DIS at 1/2 resolution: about 3 ms at 448×592 here.  ULTRAFAST at 1/4
+# (0.6 ms) reads 1-3 px of spurious mean flow on a static-camera clip (vtest), too close
+# to the motion filter's 3 px threshold; FAST at 1/2 reads 0.3-1.4 px there.
+MEAN_FLOW_SCALE = 2
+MEAN_FLOW_PRESET = "fast"
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    """(H, W) contiguous uint8 grayscale of an RGB (H, W, 3) or gray (H, W) uint8 image."""
+    gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
+    return np.ascontiguousarray(gray)
+
+
+class DISCorrespondence(CorrespondenceSource):
+    """DIS optical flow with forward-backward and photometric confidence.
+
+    Args:
+        cfg: ``preset`` (ultrafast | fast | medium), ``fb_thresh`` (px) and
+            ``photo_sigma`` (intensity in [0, 1]) are used.
+    """
+
+    name = "dis"
+
+    def __init__(self, cfg: CorrespondenceConfig | None = None) -> None:
+        cfg = cfg or CorrespondenceConfig()
+        if cfg.preset not in PRESETS:
+            raise ConfigError(f"correspondence.preset '{cfg.preset}' is not one of: {', '.join(PRESETS)}")
+        if not cfg.fb_thresh > 0:
+            raise ConfigError(f"correspondence.fb_thresh must be > 0, got {cfg.fb_thresh}")
+        if not cfg.photo_sigma > 0:
+            raise ConfigError(f"correspondence.photo_sigma must be > 0, got {cfg.photo_sigma}")
+        self.cfg = cfg
+        self._dis = cv2.DISOpticalFlow_create(PRESETS[cfg.preset])
+        self._dis_quick = cv2.DISOpticalFlow_create(PRESETS[MEAN_FLOW_PRESET])
+
+    def flow(self, gray_i: np.ndarray, gray_j: np.ndarray, init_flow: np.ndarray | None = None) -> np.ndarray:
+        """(H, W, 2) float32 DIS flow gray_i → gray_j, optionally started from ``init_flow``."""
+        start = None if init_flow is None else np.ascontiguousarray(init_flow, dtype=np.float32).copy()
+        return np.ascontiguousarray(self._dis.calc(gray_i, gray_j, start), dtype=np.float32)
+
+    def match(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None = None) -> Correspondence:
+        validate_image(image_i, "image_i")
+        validate_image(image_j, "image_j")
+        if image_i.shape != image_j.shape:
+            raise ValueError(f"image_i and image_j differ in shape: {image_i.shape} vs {image_j.shape}")
+        init = None if init_flow is None else validate_flow(init_flow, image_i.shape[:2])
+        gray_i, gray_j = to_gray(image_i), to_gray(image_j)
+        fwd = self.flow(gray_i, gray_j, init)
+        bwd = self.flow(gray_j, gray_i, None if init is None else invert_flow(init))
+        conf = flow_confidence(gray_i, gray_j, fwd, bwd, self.cfg.fb_thresh, self.cfg.photo_sigma)
+        w = np.clip(area_downsample(conf), 0.0, 1.0)
+        target = torch.from_numpy(flow_to_target(fwd))
+        weight = torch.from_numpy(np.repeat(w[..., None], 2, axis=-1))
+        return Correspondence(flow=fwd, target=target, weight=weight)
+
+    def mean_flow(self, image_i: np.ndarray, image_j: np.ndarray) -> float:
+        """Mean flow magnitude (full-res px) from FAST DIS on half-size grayscale images (cheap; for the motion filter)."""
+        validate_image(image_i, "image_i")
+        validate_image(image_j, "image_j")
+        if image_i.shape != image_j.shape:
+            raise ValueError(f"image_i and image_j differ in shape: {image_i.shape} vs {image_j.shape}")
+        h, w = image_i.shape[:2]
+        s = MEAN_FLOW_SCALE if min(h, w) >= 16 * MEAN_FLOW_SCALE else 1
+        size = (w // s, h // s)
+        small = [cv2.resize(to_gray(im), size, interpolation=cv2.INTER_AREA) for im in (image_i, image_j)]
+        flow = self._dis_quick.calc(small[0], small[1], None)
+        return float(np.linalg.norm(flow, axis=-1).mean() * s)
