@@ -1,1 +1,18 @@
-"""synth"""
+"""A synthetic dynamic-scene generator with exact ground truth.
+
+A textured room with furniture, a handheld camera and people ("walkers",
+textured boxes) walking through it.  Per frame: colour, z-depth, the mask of
+walker pixels and the camera pose — all exact, for tests, benchmarks and
+``droidw demo``.
+
+    >>> cfg = SynthConfig.preset("dynamic-small", seed=3)
+    >>> for frame in render_sequence(cfg): ...        # streaming
+    >>> write_sequence(cfg, "out/seq")                  # TUM-style folder
+"""
+
+from droidw_cli.synth.config import PRESETS, SynthConfig, SynthFrame
+from droidw_cli.synth.render import build_scene, render_sequence
+from droidw_cli.synth.scene import Scene
+from droidw_cli.synth.writer import write_sequence
+
+__all__ = ["PRESETS", "Scene", "SynthConfig", "SynthFrame", "build_scene", "render_sequence", "write_sequence"]

@@ -1,0 +1,171 @@
+"""Parameters of a synthetic sequence (:class:`SynthConfig`) and one rendered frame (:class:`SynthFrame`).
+
+Conventions
+-----------
+* World frame: x right, y into the room, z up (metres).  The room spans
+  x ∈ [−W/2, W/2], y ∈ [0, D], z ∈ [0, H].
+* Camera frame: OpenCV (x right, y down, z forward); ``pose_c2w`` maps camera
+  coordinates to world coordinates, X_w = R X_c + t.
+* Pixel centres sit at integer coordinates (see :mod:`droidw_cli.geometry.camera`),
+  so the default principal point is ((W − 1)/2, (H − 1)/2).
+* ``depth`` is the z-depth in metres (not the ray length): a pixel (u, v) with
+  depth d back-projects to d · K⁻¹ [u, v, 1]ᵀ.
+* Frame k has timestamp ``t0 + k / fps`` rounded to microseconds, the value
+  written in the TUM files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+TUM_FOCAL_640 = 525.0  # the TUM RGB-D nominal focal length at 640×480
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """A synthetic room with a handheld camera and ``movers`` walking people.
+
+    The same config gives byte-identical output.  Room, furniture, textures
+    and the camera path depend only on ``seed`` (and the resolution, through
+    the texel density), so ``static=True`` and the dynamic variant of one seed
+    show the same room along the same path; movers are added on top (static
+    pixels are identical).  The walkers' paths are tuned to the sequence
+    (``frames``, ``fps``, speeds): the largest walker coverage of the image
+    over the sequence is about ``target_coverage``.
+
+    ``fx``/``fy``/``cx``/``cy`` default to the TUM focal length scaled to the
+    width and the image centre.  ``texel_density`` (texels per metre)
+    defaults to fx / 2, i.e. one texel per pixel at 2 m.  ``target_coverage``
+    is the largest fraction of the image the movers cover at some frame: the
+    closest mover's path is tuned to reach it (for 1-4 movers; more movers
+    cover more).  ``camera_speed`` and ``mover_speed`` scale time for the
+    camera path and the walkers (2.0 = twice the motion per frame).  ``noise_std`` adds Gaussian pixel noise
+    (grey levels, 0-255 scale) to the colour images only.
+    """
+
+    width: int = 640
+    height: int = 480
+    frames: int = 300
+    fps: float = 30.0
+    seed: int = 0
+    movers: int = 3
+    fx: float | None = None
+    fy: float | None = None
+    cx: float | None = None
+    cy: float | None = None
+    noise_std: float = 0.0
+    static: bool = False
+    t0: float = 0.0
+    texel_density: float | None = None
+    target_coverage: float = 0.35
+    camera_speed: float = 1.0
+    mover_speed: float = 1.0
+    depth_scale: float = 5000.0
+    max_depth: float = 10.0
+
+    def __post_init__(self) -> None:
+        if int(self.width) != self.width or int(self.height) != self.height or self.width < 16 or self.height < 16:
+            raise ValueError(f"image size must be integers >= 16, got {self.width}x{self.height}")
+        if self.frames < 1:
+            raise ValueError(f"frames must be >= 1, got {self.frames}")
+        if not self.fps > 0:
+            raise ValueError(f"fps must be positive, got {self.fps}")
+        if self.movers < 0:
+            raise ValueError(f"movers must be >= 0, got {self.movers}")
+        if self.noise_std < 0:
+            raise ValueError(f"noise_std must be >= 0, got {self.noise_std}")
+        for name in ("fx", "fy", "texel_density"):
+            v = getattr(self, name)
+            if v is not None and not v > 0:
+                raise ValueError(f"{name} must be positive, got {v}")
+        if not 0.0 < self.target_coverage < 1.0:
+            raise ValueError(f"target_coverage must be in (0, 1), got {self.target_coverage}")
+        if self.camera_speed < 0 or self.mover_speed < 0:
+            raise ValueError("camera_speed and mover_speed must be >= 0")
+        if not (0 < self.depth_scale and 0 < self.max_depth and self.max_depth * self.depth_scale <= 65535):
+            raise ValueError("need depth_scale > 0, max_depth > 0 and max_depth * depth_scale <= 65535 (16-bit PNG)")
+
+    # -- derived values ---------------------------------------------------
+    @property
+    def n_movers(self) -> int:
+        """The number of walkers actually rendered (0 when ``static``)."""
+        return 0 if self.static else int(self.movers)
+
+    @property
+    def intrinsics(self) -> np.ndarray:
+        """``[fx, fy, cx, cy]`` (float64) at the output resolution."""
+        fx = self.fx if self.fx is not None else TUM_FOCAL_640 * self.width / 640.0
+        fy = self.fy if self.fy is not None else fx
+        cx = self.cx if self.cx is not None else (self.width - 1) / 2.0
+        cy = self.cy if self.cy is not None else (self.height - 1) / 2.0
+        return np.array([fx, fy, cx, cy], dtype=np.float64)
+
+    @property
+    def K(self) -> np.ndarray:
+        """The 3×3 camera matrix."""
+        fx, fy, cx, cy = self.intrinsics
+        return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def rho(self) -> float:
+        """Texel density in texels per metre."""
+        return float(self.texel_density) if self.texel_density is not None else float(self.intrinsics[0]) / 2.0
+
+    @property
+    def duration(self) -> float:
+        """Seconds covered by the sequence (first to last frame)."""
+        return (self.frames - 1) / self.fps
+
+    def timestamp(self, k: int) -> float:
+        """Timestamp of frame ``k`` in seconds, rounded to microseconds as written in the files."""
+        return round(self.t0 + k / self.fps, 6)
+
+    # -- presets ----------------------------------------------------------
+    @classmethod
+    def preset(cls, name: str, **overrides) -> "SynthConfig":
+        """A named configuration, with keyword overrides.
+
+        ``static`` / ``dynamic`` / ``busy`` (no, 3 and 4 walkers; 640×480,
+        300 frames) and ``*-small`` variants (320×240, 40 frames) for tests.
+        """
+        if name not in PRESETS:
+            raise ValueError(f"unknown synth preset {name!r} (use one of {', '.join(sorted(PRESETS))})")
+        return cls(**{**PRESETS[name], **overrides})
+
+    @staticmethod
+    def preset_names() -> list[str]:
+        return sorted(PRESETS)
+
+    def replace(self, **changes) -> "SynthConfig":
+        return dataclasses.replace(self, **changes)
+
+
+_SMALL = {"width": 320, "height": 240, "frames": 40}
+PRESETS: dict[str, dict] = {
+    "static": {"static": True, "movers": 0},
+    "dynamic": {"movers": 3},
+    "busy": {"movers": 4},
+    "static-small": {"static": True, "movers": 0, **_SMALL},
+    "dynamic-small": {"movers": 3, **_SMALL},
+    "busy-small": {"movers": 4, **_SMALL},
+}
+
+
+@dataclass(frozen=True, eq=False)
+class SynthFrame:
+    """One rendered frame with exact ground truth.
+
+    ``rgb`` (H, W, 3) uint8 RGB; ``depth`` (H, W) float32 z-depth in metres;
+    ``mask`` (H, W) bool, True where a walker is the nearest surface;
+    ``pose_c2w`` (4, 4) float64 camera-to-world; ``index`` the frame number.
+    """
+
+    timestamp: float
+    rgb: np.ndarray
+    depth: np.ndarray
+    mask: np.ndarray
+    pose_c2w: np.ndarray
+    index: int = 0

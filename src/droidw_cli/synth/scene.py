@@ -1,0 +1,292 @@
+"""The synthetic scene: room, furniture, walkers on their paths, camera path, texture atlas.
+
+Coverage of the image by walkers is estimated cheaply by casting rays at
+48 × 36 (for 4:3 images) against the walkers' boxes only, on up to 90 frames
+spread over the sequence.
+
+The *far* walkers (1, 2, …) loop in the back part of the room (y ≥ FAR_Y).
+Their loops are drawn up to 8 times until their combined coverage stays
+below target − 0.08 (else the best draw is kept).
+
+Walker 0 is the *close* walker: its ellipse is laid out so that at the middle
+of the sequence it crosses the view sideways at distance d from the camera.
+d is tuned by bisection so that the largest coverage over the sequence is
+close to ``cfg.target_coverage``: coverage falls as d grows, so bisection
+converges; a d that brings the walker within 0.45 m of the camera at any
+frame counts as "too close".  The paths therefore depend on ``cfg.frames``
+(and fps, speeds); the room, textures and camera path do not.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from droidw_cli.geometry.camera import scale_intrinsics
+from droidw_cli.synth import layout
+from droidw_cli.synth.atlas import AtlasBuilder
+from droidw_cli.synth.config import SynthConfig, SynthFrame
+from droidw_cli.synth.paths import CameraPath, EllipseWalk, make_walk, random_camera_path
+from droidw_cli.synth.raycast import Box, RayCaster, box_hits, shade
+
+COVER_WIDTH = 48
+COVER_FRAMES = 90
+FAR_Y = 2.8  # the other walkers stay beyond this y (the camera is at y ≈ 0.5-1.3)
+MIN_CLEARANCE = 0.45  # metres between the camera and a walker's axis
+
+
+@dataclass(frozen=True, eq=False)
+class Walker:
+    """Rigid parts (centre in body coordinates, half extents, atlas table) moving along ``walk``."""
+
+    walk: EllipseWalk
+    centres: tuple[np.ndarray, ...]
+    halves: tuple[np.ndarray, ...]
+    tables: tuple[np.ndarray, ...]
+
+    def boxes(self, t: float) -> list[Box]:
+        rot, pos = self.walk.state(t)
+        parts = zip(self.centres, self.halves, self.tables)
+        return [Box(pos + rot @ c, rot, h, tab, dynamic=True) for c, h, tab in parts]
+
+
+def _extent(e1: np.ndarray, a: float, b: float) -> np.ndarray:
+    """Half extents in x, y of the ellipse a cos(s) e₁ + b sin(s) e₂ (e₂ = e₁ turned 90°)."""
+    e2 = np.array([-e1[1], e1[0]])
+    return np.sqrt((a * e1) ** 2 + (b * e2) ** 2)
+
+
+def _shrink(e1: np.ndarray, a: float, b: float, lo: np.ndarray, hi: np.ndarray,
+            a_min: float = 0.5, b_min: float = 0.3) -> tuple[float, float]:
+    """Shrink (a, b) (not below a_min, b_min) until the ellipse fits in the rectangle's size."""
+    for _ in range(60):
+        if np.all(2 * _extent(e1, a, b) <= hi - lo) or (a <= a_min and b <= b_min):
+            break
+        a, b = max(a_min, 0.95 * a), max(b_min, 0.95 * b)
+    return a, b
+
+
+def _slide(centre: np.ndarray, direction: np.ndarray, ext: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Move ``centre`` along ``direction`` the least so that centre ± ext lies in [lo, hi]; clip if impossible."""
+    s_lo, s_hi = -np.inf, np.inf
+    for c in range(2):
+        a, b = lo[c] + ext[c] - centre[c], hi[c] - ext[c] - centre[c]
+        if abs(direction[c]) < 1e-9:
+            if a > 1e-9 or b < -1e-9:
+                s_lo, s_hi = 1.0, 0.0  # infeasible along this direction
+            continue
+        s1, s2 = sorted((a / direction[c], b / direction[c]))
+        s_lo, s_hi = max(s_lo, s1), min(s_hi, s2)
+    if s_lo <= s_hi:
+        return centre + float(np.clip(0.0, s_lo, s_hi)) * direction
+    return np.clip(centre, lo + ext, np.maximum(lo + ext, hi - ext))
+
+
+def _far_walk(rng: np.random.Generator, room: np.ndarray) -> EllipseWalk:
+    """A loop in the back part of the room, at least ~1.4 m in front of the camera."""
+    lo, hi = layout.walker_region(room, FAR_Y)
+    ang = rng.uniform(-0.4, 0.4) + (np.pi / 2 if rng.uniform() < 0.25 else 0.0)
+    e1 = np.array([np.cos(ang), np.sin(ang)])
+    a, b = _shrink(e1, rng.uniform(0.6, 1.5), rng.uniform(0.3, 0.6), lo, hi)
+    centre = _slide(rng.uniform(lo, hi), np.array([1.0, 0.0]), _extent(e1, a, b), lo, hi)
+    centre = _slide(centre, np.array([0.0, 1.0]), _extent(e1, a, b), lo, hi)
+    return make_walk(centre, e1, a, b, rng.uniform(0.6, 1.2), int(rng.choice([-1, 1])), rng.uniform(0, 2 * np.pi), 0.0)
+
+
+class _CloseWalkFactory:
+    """Walker 0's loop as a function of its distance d to the camera at the middle frame.
+
+    The loop is an ellipse elongated across the view: its near point is d
+    metres ahead of the camera (along the viewing direction projected on the
+    floor) and the walker passes it, walking sideways, at the middle frame.
+    It slides sideways (keeping d) to stay inside the room.
+    """
+
+    def __init__(self, rng: np.random.Generator, room: np.ndarray, camera: CameraPath, t_cam: float, t_walk: float):
+        self.room, self.t_walk = room, t_walk
+        pos, tgt = camera.position(t_cam), camera.target(t_cam)
+        fwd = (tgt - pos)[:2]
+        self.fwd = fwd / np.linalg.norm(fwd)
+        self.cam_xy = pos[:2]
+        self.a, self.b = rng.uniform(1.1, 1.6), rng.uniform(0.35, 0.6)
+        self.speed = rng.uniform(0.9, 1.2)
+        self.direction = int(rng.choice([-1, 1]))
+
+    def __call__(self, d: float) -> EllipseWalk:
+        lo, hi = layout.walker_region(self.room, 0.3)
+        e1 = np.array([self.fwd[1], -self.fwd[0]])  # e₂ = fwd: the loop extends away from the camera
+        q = self.cam_xy + d * self.fwd  # where the walker should be at the middle frame
+        a, b = self.a, self.b
+        while a > 0.8:  # a shorter loop rather than one slid out of view ...
+            ext = _extent(e1, a, b)
+            if np.all(q + b * self.fwd - ext >= lo) and np.all(q + b * self.fwd + ext <= hi):
+                break
+            a = max(0.8, 0.95 * a)
+        a, b = _shrink(e1, a, b, lo, hi)
+        centre0 = q + b * self.fwd
+        centre = _slide(centre0, e1, _extent(e1, a, b), lo, hi)  # ... but slide it if it must
+        # pass the point of the loop's near side nearest to q at the middle frame
+        c = float(np.clip(-(centre - centre0) @ e1 / a, -1.0, 1.0))
+        s_at = float(np.arctan2(-np.sqrt(1.0 - c * c), c))
+        return make_walk(centre, e1, a, b, self.speed, self.direction, s_at, self.t_walk)
+
+
+def _tune_close_walk(cfg: SynthConfig, factory: _CloseWalkFactory, walker0_parts, other_hits: np.ndarray,
+                     poses: np.ndarray, t_walk: np.ndarray, intr_small: np.ndarray, size,
+                     clearance: tuple[np.ndarray, np.ndarray]) -> EllipseWalk:
+    """Bisection on the close distance d ∈ [0.5, 3.5] m for max coverage ≈ target.
+
+    Coverage is measured at the sampled ``poses``/``t_walk``; the clearance
+    (camera xy, walker time) is checked on every frame.
+    """
+    w, h = size
+    cam_xy, t_dense = clearance
+
+    def max_cover(d: float) -> float:
+        walk = factory(d)
+        if np.min(np.linalg.norm(walk.state(t_dense)[1][:, :2] - cam_xy, axis=1)) < MIN_CLEARANCE:
+            return 1.0
+        rot, pos = walk.state(t_walk)
+        hits = other_hits.copy()
+        for c, half in walker0_parts:
+            hits |= box_hits(pos + rot @ c, rot, half, poses, intr_small, w, h)
+        return float(hits.mean(1).max())
+
+    target = cfg.target_coverage
+    lo, hi = 0.5, 3.5
+    best = (abs(max_cover(hi) - target), hi)
+    for _ in range(9):
+        mid = 0.5 * (lo + hi)
+        cov = max_cover(mid)
+        best = min(best, (abs(cov - target), mid))
+        if abs(cov - target) < 0.02:
+            break
+        if cov > target:
+            lo = mid
+        else:
+            hi = mid
+    return factory(best[1])
+
+
+class Scene:
+    """Everything needed to render any frame of a :class:`SynthConfig`, in any order."""
+
+    def __init__(self, cfg: SynthConfig):
+        self.cfg = cfg
+        seed = cfg.seed
+        self.room = layout.room_size(seed)
+        self.camera = random_camera_path(np.random.default_rng([seed, layout.TAG_CAMERA]), self.room)
+        room_spec = layout.room_spec(seed, self.room)
+        furniture = layout.furniture_specs(seed, self.room)
+        walker_parts = [layout.walker_specs(seed, i) for i in range(cfg.n_movers)]
+        walks = self._walks(walker_parts)
+
+        builder = AtlasBuilder(cfg.rho)
+        for spec in [room_spec, *furniture]:
+            builder.add_box(spec.half, spec.materials, spec.shades, spec.seed, group=0)
+        for spec in (p for parts in walker_parts for p in parts):
+            builder.add_box(spec.half, spec.materials, spec.shades, spec.seed, group=1)
+        self.atlas, tables = builder.build()
+        self.static_boxes = [Box(room_spec.centre, np.eye(3), room_spec.half, tables[0], inside=True)]
+        self.static_boxes += [Box(s.centre, s.rotation, s.half, t) for s, t in zip(furniture, tables[1:])]
+        rest = iter(tables[1 + len(furniture):])
+        self.walkers = [Walker(walk, tuple(p.centre for p in parts), tuple(p.half for p in parts),
+                               tuple(next(rest) for _ in parts)) for walk, parts in zip(walks, walker_parts)]
+        self.caster = RayCaster(cfg.intrinsics, cfg.width, cfg.height, cfg.rho)
+
+    # -- time and poses -----------------------------------------------------
+    def camera_time(self, k) -> np.ndarray:
+        return np.asarray(k, np.float64) / self.cfg.fps * self.cfg.camera_speed
+
+    def walker_time(self, k) -> np.ndarray:
+        return np.asarray(k, np.float64) / self.cfg.fps * self.cfg.mover_speed
+
+    def pose(self, k) -> np.ndarray:
+        """Camera-to-world pose(s) of frame(s) k, (…, 4, 4) float64."""
+        return self.camera.pose(self.camera_time(k))
+
+    def _walks(self, walker_parts) -> list[EllipseWalk]:
+        """The walkers' paths: the far ones by rejection sampling (their combined coverage
+        below target − 0.08 if possible, 8 tries), then walker 0 tuned to the target."""
+        cfg = self.cfg
+        if not walker_parts:
+            return []
+        seed = cfg.seed
+        ks = np.unique(np.round(np.linspace(0, cfg.frames - 1, min(cfg.frames, COVER_FRAMES))))
+        poses, t_walk = self.pose(ks), self.walker_time(ks)
+        cw = COVER_WIDTH
+        ch = max(8, int(round(cw * cfg.height / cfg.width)))
+        intr_small = scale_intrinsics(cfg.intrinsics, cfg.width / cw)
+
+        def hits_of(walk: EllipseWalk, parts) -> np.ndarray:
+            rot, pos = walk.state(t_walk)
+            out = np.zeros((len(ks), cw * ch), bool)
+            for p in parts:
+                out |= box_hits(pos + rot @ p.centre, rot, p.half, poses, intr_small, cw, ch)
+            return out
+
+        best = None
+        for attempt in range(8):
+            far = [_far_walk(np.random.default_rng([seed, layout.TAG_PATH + i, attempt]), self.room)
+                   for i in range(1, len(walker_parts))]
+            others = np.zeros((len(ks), cw * ch), bool)
+            for walk, parts in zip(far, walker_parts[1:]):
+                others |= hits_of(walk, parts)
+            cover = float(others.mean(1).max())
+            if best is None or cover < best[0]:
+                best = (cover, far, others)
+            if cover <= cfg.target_coverage - 0.08:
+                break
+        _, far, others = best
+        mid = (cfg.frames - 1) / 2.0
+        factory = _CloseWalkFactory(np.random.default_rng([seed, layout.TAG_PATH]), self.room, self.camera,
+                                    float(self.camera_time(mid)), float(self.walker_time(mid)))
+        parts0 = [(p.centre, p.half) for p in walker_parts[0]]
+        dense = np.unique(np.round(np.linspace(0, cfg.frames - 1, min(cfg.frames, 20000))))
+        clearance = (self.camera.position(self.camera_time(dense))[:, :2], self.walker_time(dense))
+        walks = [_tune_close_walk(cfg, factory, parts0, others, poses, t_walk, intr_small, (cw, ch), clearance), *far]
+        return walks  # type: ignore[return-value]
+
+    # -- rendering ------------------------------------------------------------
+    def boxes(self, k: int, static: bool = True, movers: bool = True) -> list[Box]:
+        out = list(self.static_boxes) if static else []
+        if movers:
+            t = float(self.walker_time(k))
+            for w in self.walkers:
+                out += w.boxes(t)
+        return out
+
+    def render(self, k: int, static: bool = True, movers: bool = True,
+               pose_c2w: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(rgb uint8, depth float32 metres with 0 where nothing is hit, mask bool) of frame k.
+
+        ``static``/``movers`` leave out the room or the walkers (for checks);
+        ``pose_c2w`` renders frame k's scene from another viewpoint.
+        """
+        pose = self.pose(k) if pose_c2w is None else np.asarray(pose_c2w, np.float64)
+        hits = self.caster.cast(self.boxes(k, static, movers), pose)
+        rgb = shade(self.atlas, hits)
+        depth = hits.depth
+        depth[~np.isfinite(depth)] = 0.0
+        if self.cfg.noise_std > 0:
+            rng = np.random.default_rng([self.cfg.seed, layout.TAG_NOISE, int(k)])
+            noise = rng.standard_normal(rgb.shape, dtype=np.float32) * np.float32(self.cfg.noise_std)
+            rgb = np.clip(np.rint(rgb + noise), 0, 255).astype(np.uint8)
+        return rgb, depth, hits.dynamic
+
+    def frame(self, k: int) -> SynthFrame:
+        if not 0 <= k < self.cfg.frames:
+            raise ValueError(f"frame index {k} out of range [0, {self.cfg.frames})")
+        rgb, depth, mask = self.render(k)
+        return SynthFrame(self.cfg.timestamp(k), rgb, depth, mask, self.pose(k), int(k))
+
+    def walker_poses(self, k: int) -> list[np.ndarray]:
+        """Body-to-world 4×4 poses of the walkers at frame k (body origin on the floor)."""
+        out = []
+        for w in self.walkers:
+            rot, pos = w.walk.state(float(self.walker_time(k)))
+            m = np.eye(4)
+            m[:3, :3], m[:3, 3] = rot, pos
+            out.append(m)
+        return out
