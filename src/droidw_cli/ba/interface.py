@@ -47,17 +47,45 @@ class BABackend(ABC):
 
     @abstractmethod
     def ba_step(self, state: BAState, edges: EdgeSet, params: BAParams) -> BAStepResult:
-        """One damped Gauss-Newton iteration on poses (≥ t0) and disparities (Eq. 4-5)."""
+        """One damped Gauss-Newton iteration on poses (≥ t0) and disparities (Eq. 4-5).
+
+        Residual r = p*_ij − p_ij, weight w_ij · flow_weight_scale · f(u_i)
+        [· f(u_j(p_ij)) if bidirectional] where u comes from state.features and
+        θ when ``params.uncertainty.enable`` (else unweighted), plus γ_d(d − D)²
+        where D > 0.  Block-sparse Schur complement, float64 Cholesky of the
+        reduced pose (+ log-focal) system; T ← Exp(Δξ)·T with Δξ = [v, ω];
+        Δd = C⁻¹(w − EᵀΔξ); d ≥ min_disp.  ``cost`` is the energy before the
+        step; ``solved`` False means the factorisation failed and the state is
+        unchanged.  See :mod:`droidw_cli.ba.schur`.
+        """
 
     @abstractmethod
     def uncertainty_step(self, state: BAState, edges: EdgeSet, params: BAParams) -> UncertaintyStepResult:
-        """One gradient step on θ of u = softplus(θ·F + b) (Eq. 6-9, supp. Eq. 11-13)."""
+        """One gradient step on θ of u = softplus(θ·F + b) (Eq. 6-9, supp. Eq. 11-13).
+
+        θ ← θ − λ g − η θ with g the analytic gradient of E_uncer as defined in
+        :mod:`droidw_cli.ba.uncertainty` (per-keyframe edge averaging, E_sim only
+        on edges with |frame_id_i − frame_id_j| ≥ min_frame_gap).  No E_sim
+        edge: θ is returned unchanged with loss 0.
+        """
+
+
+def _all_finite(t: Tensor) -> bool:
+    """True when every element is finite (a one-pass sum first; the exact test only if it fails)."""
+    if t.numel() == 0:
+        return True
+    if bool(torch.isfinite(t.sum(dtype=torch.float64))):
+        return True
+    return bool(torch.isfinite(t).all())
 
 
 def validate_inputs(state: BAState, edges: EdgeSet, need_features: bool = False) -> None:
     """Refuse malformed BA input with a clear ``ValueError``.
 
-    Checks: non-empty edges, matching shapes, indices in range, finite values.
+    Checks: non-empty edges, integer indices in range and no self-edges,
+    matching shapes (grid at least 2 × 2), finite values, non-negative weights,
+    and, when ``need_features`` (or when features are given), the features, θ and
+    frame ids.
     """
     n = state.num_frames
     if state.poses.ndim != 2 or state.poses.shape[1] != 7:
@@ -67,11 +95,17 @@ def validate_inputs(state: BAState, edges: EdgeSet, need_features: bool = False)
     if state.intrinsics.shape != (4,):
         raise ValueError(f"intrinsics must have shape (4,), got {tuple(state.intrinsics.shape)}")
     h, w = state.grid
+    if h < 2 or w < 2:
+        raise ValueError(f"the BA grid must be at least 2 x 2, got {h} x {w}")
     e = edges.num_edges
+    if edges.ii.ndim != 1:
+        raise ValueError(f"ii must have shape (E,), got {tuple(edges.ii.shape)}")
     if e == 0:
         raise ValueError("the edge set is empty: BA needs at least one edge (i, j)")
     if edges.ii.shape != (e,) or edges.jj.shape != (e,):
         raise ValueError(f"ii and jj must both have shape (E,), got {tuple(edges.ii.shape)} and {tuple(edges.jj.shape)}")
+    if edges.ii.is_floating_point() or edges.jj.is_floating_point() or edges.ii.dtype == torch.bool:
+        raise ValueError(f"ii and jj must be integer tensors, got {edges.ii.dtype} and {edges.jj.dtype}")
     for name, t in (("target", edges.target), ("weight", edges.weight)):
         if t.shape != (e, h, w, 2):
             raise ValueError(f"{name} must have shape (E={e}, H={h}, W={w}, 2), got {tuple(t.shape)}")
@@ -83,14 +117,25 @@ def validate_inputs(state: BAState, edges: EdgeSet, need_features: bool = False)
         raise ValueError("an edge connects a frame to itself (ii == jj)")
     for name, t in (("target", edges.target), ("weight", edges.weight), ("poses", state.poses),
                     ("disps", state.disps), ("intrinsics", state.intrinsics)):
-        if not bool(torch.isfinite(t).all()):
+        if not _all_finite(t):
             raise ValueError(f"{name} contains NaN or Inf")
-    if need_features:
-        if state.features is None or state.theta is None:
-            raise ValueError("uncertainty_step needs state.features and state.theta")
+    if float(edges.weight.amin()) < 0:
+        raise ValueError("weight must be >= 0")
+    if not bool((state.intrinsics[:2] > 0).all()):
+        raise ValueError(f"focal lengths must be positive, got {state.intrinsics[:2].tolist()}")
+    if need_features and (state.features is None or state.theta is None):
+        raise ValueError("uncertainty needs state.features and state.theta")
+    if state.features is not None and state.theta is not None:
         if state.features.ndim != 4 or state.features.shape[0] != n or tuple(state.features.shape[2:]) != (h, w):
             raise ValueError(f"features must have shape (N={n}, C, H={h}, W={w}), got {tuple(state.features.shape)}")
         if state.theta.shape != (state.features.shape[1] + 1,):
             raise ValueError(f"theta must have shape (C+1={state.features.shape[1] + 1},), got {tuple(state.theta.shape)}")
-    if state.depth_prior is not None and state.depth_prior.shape != state.disps.shape:
-        raise ValueError(f"depth_prior must match disps {tuple(state.disps.shape)}, got {tuple(state.depth_prior.shape)}")
+        if not _all_finite(state.theta):
+            raise ValueError("theta contains NaN or Inf")
+    if state.frame_ids is not None and state.frame_ids.shape != (n,):
+        raise ValueError(f"frame_ids must have shape (N={n},), got {tuple(state.frame_ids.shape)}")
+    if state.depth_prior is not None:
+        if state.depth_prior.shape != state.disps.shape:
+            raise ValueError(f"depth_prior must match disps {tuple(state.disps.shape)}, got {tuple(state.depth_prior.shape)}")
+        if not _all_finite(state.depth_prior):
+            raise ValueError("depth_prior contains NaN or Inf")

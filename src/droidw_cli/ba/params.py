@@ -33,6 +33,9 @@ class UncertaintyParams:
         softplus_offset: u = log(offset + exp(θ·F + b)); official 1.1 so u > 0.095.
         warmup_iters: BA iterations after initialisation run unweighted (official 8).
         freeze_in_global: θ stays fixed during the final global BA.
+        average_per_keyframe: average the data term per keyframe by its number of
+            E_sim edges (see :mod:`droidw_cli.ba.uncertainty`); False gives the plain
+            mean over edges.
     """
 
     enable: bool = True
@@ -47,10 +50,15 @@ class UncertaintyParams:
     softplus_offset: float = 1.1
     warmup_iters: int = 8
     freeze_in_global: bool = True
+    average_per_keyframe: bool = True
 
     def __post_init__(self) -> None:
         if self.mode not in UNCERTAINTY_MODES:
             raise ValueError(f"uncertainty.mode must be one of {UNCERTAINTY_MODES}, got {self.mode!r}")
+        if self.softplus_offset <= 0:
+            raise ValueError("uncertainty.softplus_offset must be > 0")
+        if self.min_frame_gap < 0 or self.lr < 0 or self.weight_decay < 0:
+            raise ValueError("uncertainty.min_frame_gap, lr and weight_decay must be >= 0")
 
 
 @dataclass(frozen=True)
@@ -91,3 +99,8 @@ class BAParams:
             raise ValueError(f"ba.optimize_focal must be one of {FOCAL_MODES}, got {self.optimize_focal!r}")
         if self.t0 < 0:
             raise ValueError("ba.t0 must be >= 0")
+        if self.min_disp <= 0 or self.min_depth < 0:
+            raise ValueError("ba.min_disp must be > 0 and ba.min_depth >= 0")
+        if min(self.depth_damping, self.prior_damping, self.pose_damping_rel, self.pose_damping_abs,
+               self.gamma_depth, self.flow_weight_scale) < 0:
+            raise ValueError("ba damping, gamma_depth and flow_weight_scale must be >= 0")

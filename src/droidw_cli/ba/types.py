@@ -11,6 +11,8 @@ Conventions (all on the 1/8-resolution grid, H × W):
 * ``features``: (N, C, H, W) dense features F_t (float16 or float32).
 * ``theta``: (C + 1,) float32 affine map, u = softplus(θ[:C]·F + θ[C]).
 * ``depth_prior``: (N, H, W) prior *disparity* D_t; 0 where there is none.
+* ``frame_ids``: (N,) int64 absolute keyframe indices, used only for the
+  |i − j| ≥ min_frame_gap test of E_sim; None means positions 0..N−1.
 * Edge k is directed (ii[k] → jj[k]): pixels of frame ii[k] are projected
   into frame jj[k].  ``target`` (E, H, W, 2) holds p*_ij as (x, y) grid
   coordinates in frame jj; ``weight`` (E, H, W, 2) the confidence w_ij ≥ 0.
@@ -34,6 +36,7 @@ class BAState:
     features: Tensor | None = None
     theta: Tensor | None = None
     depth_prior: Tensor | None = None
+    frame_ids: Tensor | None = None
 
     @property
     def num_frames(self) -> int:
@@ -51,6 +54,12 @@ class BAState:
         """The same state on another device (None fields stay None)."""
         moved = {k: (v.to(device) if isinstance(v, Tensor) else v) for k, v in self.__dict__.items()}
         return BAState(**moved)
+
+    def keyframe_ids(self) -> Tensor:
+        """(N,) int64 absolute keyframe indices (``frame_ids`` or 0..N−1)."""
+        if self.frame_ids is not None:
+            return self.frame_ids.long()
+        return torch.arange(self.num_frames, device=self.poses.device)
 
 
 @dataclass(frozen=True)

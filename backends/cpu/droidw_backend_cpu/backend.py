@@ -1,0 +1,133 @@
+"""The reference backend: vectorised torch on the CPU (DROID-W Eq. 1-9).
+
+Every operation is a tensor operation over edges and pixels (edges go in
+memory-bounded chunks); the only Python loops run over chunks and over the
+handful of distinct "blocks per frame" counts of the Schur complement.
+Torch's intra-op thread pool is used as configured (``torch.get_num_threads()``,
+by default one thread per core); the backend never changes it.
+
+The three hooks ``_project``, ``_linearize`` and ``_similarity_term`` are the
+hot paths; the CUDA backend subclasses this class and replaces them with
+kernels, so the assembly, the Schur solve and the uncertainty update are shared.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from droidw_cli.ba.interface import BABackend, validate_inputs
+from droidw_cli.ba.params import BAParams
+from droidw_cli.ba.schur import BlockLayout, LinearSystem, build_layout, solve_step
+from droidw_cli.ba.types import BAState, BAStepResult, EdgeSet, UncertaintyStepResult
+from droidw_cli.ba.uncertainty import (
+    edge_objective_weights,
+    finish_uncertainty_step,
+    similarity_edge_mask,
+    uncertainty_from_logits,
+    uncertainty_logits,
+)
+from droidw_cli.geometry.projection import reproject as torch_reproject
+from droidw_backend_cpu.linearize import DEFAULT_CHUNK_BYTES, linearize
+from droidw_backend_cpu.uncertainty import DEFAULT_FEATURE_CHUNK_BYTES, similarity_data_term
+
+
+class CpuBackend(BABackend):
+    """Pure-torch uncertainty-aware dense BA (the reference implementation).
+
+    Args:
+        chunk_bytes: memory budget of the GN linearisation temporaries.
+        feature_chunk_bytes: memory budget of the gathered features in the
+            uncertainty step.
+    """
+
+    name = "cpu"
+
+    def __init__(self, chunk_bytes: int = DEFAULT_CHUNK_BYTES,
+                 feature_chunk_bytes: int = DEFAULT_FEATURE_CHUNK_BYTES) -> None:
+        self.chunk_bytes = int(chunk_bytes)
+        self.feature_chunk_bytes = int(feature_chunk_bytes)
+
+    @classmethod
+    def availability(cls) -> tuple[bool, str]:
+        return True, f"torch {torch.__version__}, {torch.get_num_threads()} CPU threads"
+
+    @property
+    def device(self) -> torch.device:
+        return torch.device("cpu")
+
+    # ----------------------------------------------------------------- helpers
+    def _prepare(self, state: BAState, edges: EdgeSet | None = None) -> tuple[BAState, EdgeSet | None]:
+        """The state (and edges) on this backend's device, float32, int64 indices."""
+        dev = self.device
+        f32 = {"device": dev, "dtype": torch.float32}
+        st = BAState(
+            poses=state.poses.to(**f32), disps=state.disps.to(**f32), intrinsics=state.intrinsics.to(**f32),
+            features=None if state.features is None else state.features.to(dev),
+            theta=None if state.theta is None else state.theta.to(**f32),
+            depth_prior=None if state.depth_prior is None else state.depth_prior.to(**f32),
+            frame_ids=None if state.frame_ids is None else state.frame_ids.to(device=dev, dtype=torch.long),
+        )
+        if edges is None:
+            return st, None
+        ed = EdgeSet(edges.ii.to(device=dev, dtype=torch.long), edges.jj.to(device=dev, dtype=torch.long),
+                     edges.target.to(**f32), edges.weight.to(**f32))
+        return st, ed
+
+    # ------------------------------------------------------------------- hooks
+    def _project(self, state: BAState, ii: Tensor, jj: Tensor, min_depth: float) -> tuple[Tensor, Tensor]:
+        return torch_reproject(state.poses, state.disps, state.intrinsics, ii, jj, min_depth)
+
+    def _linearize(self, state: BAState, edges: EdgeSet, u_map: Tensor | None, params: BAParams,
+                   layout: BlockLayout) -> LinearSystem:
+        return linearize(state.poses, state.disps, state.intrinsics, edges.ii, edges.jj, edges.target,
+                         edges.weight, u_map, params, layout, self.chunk_bytes)
+
+    def _similarity_term(self, state: BAState, ii: Tensor, jj: Tensor, omega: Tensor, u: Tensor,
+                         params: BAParams) -> tuple[Tensor, Tensor]:
+        unc = params.uncertainty
+        return similarity_data_term(state.poses, state.disps, state.intrinsics, ii, jj, omega, state.features, u,
+                                    unc.gamma_data, unc.sim_threshold, params.min_depth, self.feature_chunk_bytes)
+
+    # --------------------------------------------------------------- interface
+    def reproject(self, state: BAState, ii: Tensor, jj: Tensor, min_depth: float = 0.05) -> tuple[Tensor, Tensor]:
+        st, _ = self._prepare(state)
+        ii = ii.to(device=self.device, dtype=torch.long)
+        jj = jj.to(device=self.device, dtype=torch.long)
+        if ii.ndim != 1 or ii.shape != jj.shape:
+            raise ValueError(f"ii and jj must both have shape (E,), got {tuple(ii.shape)} and {tuple(jj.shape)}")
+        if ii.numel() and (int(torch.minimum(ii.min(), jj.min())) < 0
+                           or int(torch.maximum(ii.max(), jj.max())) >= st.num_frames):
+            raise ValueError(f"edge index out of range for {st.num_frames} frames")
+        return self._project(st, ii, jj, min_depth)
+
+    def uncertainty_weights(self, state: BAState, params: BAParams) -> Tensor | None:
+        """u (N, HW) used to weight the BA, or None when the BA runs unweighted."""
+        unc = params.uncertainty
+        if not unc.enable or state.features is None or state.theta is None:
+            return None
+        logits = uncertainty_logits(state.features, state.theta)
+        return uncertainty_from_logits(logits, unc.softplus_offset).reshape(state.num_frames, -1)
+
+    def ba_step(self, state: BAState, edges: EdgeSet, params: BAParams) -> BAStepResult:
+        validate_inputs(state, edges)
+        st, ed = self._prepare(state, edges)
+        layout = build_layout(ed.ii, ed.jj, st.num_frames, params.optimize_focal)
+        lin = self._linearize(st, ed, self.uncertainty_weights(st, params), params, layout)
+        poses, disps, intr, cost, solved = solve_step(st.poses, st.disps, st.intrinsics, st.depth_prior,
+                                                      ed.ii, ed.jj, lin, layout, params)
+        return BAStepResult(st.with_(poses=poses, disps=disps, intrinsics=intr), cost, solved)
+
+    def uncertainty_step(self, state: BAState, edges: EdgeSet, params: BAParams) -> UncertaintyStepResult:
+        validate_inputs(state, edges, need_features=True)
+        st, ed = self._prepare(state, edges)
+        unc = params.uncertainty
+        keep = similarity_edge_mask(ed.ii, ed.jj, st.keyframe_ids(), unc.min_frame_gap)
+        if not bool(keep.any()):
+            return UncertaintyStepResult(theta=st.theta.clone(), loss=0.0)
+        ii, jj = ed.ii[keep], ed.jj[keep]
+        omega, involved = edge_objective_weights(ii, jj, st.num_frames, unc.average_per_keyframe)
+        logits = uncertainty_logits(st.features, st.theta)
+        u = uncertainty_from_logits(logits, unc.softplus_offset).reshape(st.num_frames, -1)
+        data_grad, data_loss = self._similarity_term(st, ii, jj, omega, u, params)
+        return finish_uncertainty_step(st.theta, st.features, logits, data_grad, data_loss, involved, unc)

@@ -1,0 +1,62 @@
+// droidw CUDA backend: parameter structs shared by the binding (.cpp) and the kernels (.cu).
+//
+// Conventions match droidw_cli.geometry.projection / droidw_backend_cpu:
+//   rel     (E, 12) float32: G_ij = G_j G_i^-1 as R (row-major, 9) then t (3)
+//   disps   (N, HW) float32, pixel p = v * W + u sits at x = u, y = v
+//   target, weight (E, HW, 2) float32 (x, y)
+//   features (N, C, HW) float32
+// Every Jacobian row count is KJ = 6 + nf (pose j twist [v, w] then log-focal rows).
+#pragma once
+
+#include <torch/extension.h>
+
+namespace droidw {
+
+// Constants of the DROID-W clamp weighting: clamp(1 / max(SLOPE u - OFFSET, FLOOR), 0, 1).
+constexpr float kClampSlope = 45.0f;
+constexpr float kClampOffset = 35.0f;
+constexpr float kClampFloor = 0.1f;
+// Guards the cosine similarity against zero-norm features (droidw_cli.ba.uncertainty.COS_EPS).
+constexpr float kCosEps = 1e-8f;
+constexpr int kPoseDof = 6;
+constexpr int kMaxFocalDof = 2;
+
+enum UncertaintyMode : int { kUncertaintyOff = 0, kUncertaintyClamp = 1, kUncertaintyInverse = 2 };
+enum FocalMode : int { kFocalNone = 0, kFocalShared = 1, kFocalXY = 2 };
+
+// Scalar settings of one linearisation (see droidw_cli.ba.params.BAParams).
+struct LinearizeConfig {
+  float fx = 0, fy = 0, cx = 0, cy = 0;
+  float min_depth = 0.05f;
+  float flow_weight_scale = 1e-3f;
+  int uncertainty_mode = kUncertaintyOff;
+  bool bidirectional = false;
+  int focal_mode = kFocalNone;
+  bool with_depth = true;  // false = motion-only: no E rows, C or w
+};
+
+// Scalar settings of one uncertainty data term (see droidw_cli.ba.uncertainty).
+struct SimilarityConfig {
+  float fx = 0, fy = 0, cx = 0, cy = 0;
+  float min_depth = 0.05f;
+  float gamma_data = 0.1f;
+  float sim_threshold = 0.5f;
+};
+
+// Tensor inputs of the linearisation; umap may be undefined (unweighted BA).
+struct LinearizeInputs {
+  torch::Tensor rel, disps, ii, jj, target, weight, umap;
+};
+
+// Tensor inputs of the uncertainty data term (sim edges only).
+struct SimilarityInputs {
+  torch::Tensor rel, disps, ii, jj, omega, features, u;
+};
+
+// Returns {hess_j (E, KJ, KJ), grad_j (E, KJ), erows (E, KJ, HW) or empty, cdiag (N, HW), wvec (N, HW), cost (1)}.
+std::vector<torch::Tensor> linearize_cuda(const LinearizeConfig& cfg, const LinearizeInputs& in);
+
+// Returns {grad (N, HW) = d(gamma_data E_sim)/du, loss (1)}.
+std::vector<torch::Tensor> similarity_cuda(const SimilarityConfig& cfg, const SimilarityInputs& in);
+
+}  // namespace droidw

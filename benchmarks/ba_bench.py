@@ -1,0 +1,140 @@
+#!/usr/bin/env python3
+"""Speed and memory of the uncertainty-aware BA backends on synthetic windows.
+
+    python benchmarks/ba_bench.py                         # table: K = 8 … 256 and the 25-kf/75-edge window
+    python benchmarks/ba_bench.py --keyframes 25 --edges 75 --json
+    python benchmarks/ba_bench.py --backend cuda --keyframes 256
+
+Per configuration it reports the median wall time of ``ba_step`` and of
+``uncertainty_step`` (after two warm-up runs) and the peak extra memory of the
+steps (warm-up included).  CPU memory is the process's peak resident set size
+(``VmHWM`` in /proc/self/status, reset through /proc/self/clear_refs once the
+problem is built) minus the resident size at that point; tracemalloc cannot see torch's allocations.  On
+CUDA it is ``torch.cuda.max_memory_allocated`` minus the allocation before
+the loop.  The table runs every configuration in a fresh subprocess so that
+the peaks do not mix.  Edges connect keyframes up to 2 apart in both
+directions (about 4 per keyframe), features have 64 channels like XFeat.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+TABLE = ((8, None), (16, None), (25, None), (25, 75), (64, None), (128, None), (256, None))
+CHANNELS = 64
+RADIUS = 2
+
+
+def _status_kb(key: str) -> int:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(key + ":"):
+            return int(line.split()[1])
+    return 0
+
+
+def _reset_peak() -> None:
+    try:
+        Path("/proc/self/clear_refs").write_text("5")
+    except OSError:  # not Linux, or not permitted: the peak then includes set-up
+        pass
+
+
+def measure(backend_name: str, keyframes: int, edges: int | None, grid: tuple[int, int], reps: int,
+            threads: int | None) -> dict:
+    import torch
+
+    from droidw_cli.ba.params import BAParams
+    from droidw_cli.ba.registry import get_backend
+    from droidw_cli.ba.synthetic import make_problem, perturb
+
+    if threads:
+        torch.set_num_threads(threads)
+    backend = get_backend(backend_name)
+    h, w = grid
+    prob = make_problem(keyframes, h=h, w=w, radius=RADIUS, max_edges=edges, channels=CHANNELS, seed=0)
+    state = perturb(prob.truth, fixed=1, seed=1).with_(theta=torch.full((CHANNELS + 1,), 0.01))
+    state, edges_set = state.to(backend.device), prob.edges.to(backend.device)
+    params = BAParams()
+    cuda = backend.device.type == "cuda"
+
+    def sync():
+        if cuda:
+            torch.cuda.synchronize()
+
+    if cuda:
+        backend.ba_step(state, edges_set, params)  # builds / loads the kernels
+        sync()
+        torch.cuda.reset_peak_memory_stats()
+        base = torch.cuda.memory_allocated()
+    else:
+        _reset_peak()
+        base = _status_kb("VmRSS") * 1024
+    for _ in range(2):  # warm-up (caches), included in the peak
+        backend.ba_step(state, edges_set, params)
+        backend.uncertainty_step(state, edges_set, params)
+    sync()
+    times_ba, times_unc = [], []
+    for _ in range(reps):
+        t = time.perf_counter()
+        backend.ba_step(state, edges_set, params)
+        sync()
+        times_ba.append(time.perf_counter() - t)
+        t = time.perf_counter()
+        backend.uncertainty_step(state, edges_set, params)
+        sync()
+        times_unc.append(time.perf_counter() - t)
+    peak = (torch.cuda.max_memory_allocated() if cuda else _status_kb("VmHWM") * 1024) - base
+    return {
+        "backend": backend.name, "keyframes": keyframes, "edges": edges_set.num_edges, "grid": f"{h}x{w}",
+        "threads": torch.get_num_threads(), "ms_ba_step": 1e3 * statistics.median(times_ba),
+        "ms_uncertainty_step": 1e3 * statistics.median(times_unc), "peak_mb": max(peak, 0) / 2**20,
+    }
+
+
+def _row(r: dict) -> str:
+    return (f"{r['backend']:>5} {r['keyframes']:>5} {r['edges']:>6} {r['grid']:>6} {r['ms_ba_step']:>10.1f} "
+            f"{r['ms_uncertainty_step']:>10.1f} {r['peak_mb']:>9.0f}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--backend", default="cpu", help="cpu | cuda | auto (default cpu)")
+    ap.add_argument("--keyframes", type=int, help="keyframes in the window (omit for the whole table)")
+    ap.add_argument("--edges", type=int, help="cap on the number of edges (default: all pairs up to 2 apart)")
+    ap.add_argument("--grid", default="48x64", help="BA grid HxW (default 48x64)")
+    ap.add_argument("--reps", type=int, default=5, help="measured repetitions (median reported)")
+    ap.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's)")
+    ap.add_argument("--json", action="store_true", help="last line: one JSON object")
+    args = ap.parse_args(argv)
+    h, w = (int(v) for v in args.grid.lower().split("x"))
+    header = f"{'back':>5} {'kf':>5} {'edges':>6} {'grid':>6} {'ba ms':>10} {'unc ms':>10} {'peak MB':>9}"
+    if args.keyframes is not None:
+        r = measure(args.backend, args.keyframes, args.edges, (h, w), args.reps, args.threads)
+        if args.json:
+            print(json.dumps(r))
+        else:
+            print(header)
+            print(_row(r))
+        return 0
+    print(header)
+    rows = []
+    for k, e in TABLE:
+        cmd = [sys.executable, __file__, "--backend", args.backend, "--keyframes", str(k), "--grid", args.grid,
+               "--reps", str(args.reps), "--json"] + (["--edges", str(e)] if e else []) + \
+              (["--threads", str(args.threads)] if args.threads else [])
+        out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1]
+        rows.append(json.loads(out))
+        print(_row(rows[-1]), flush=True)
+    if args.json:
+        print(json.dumps(rows[-1]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

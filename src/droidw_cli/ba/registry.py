@@ -1,0 +1,113 @@
+"""Finding BA backends by name.
+
+Backends register under the entry-point group ``droidw.backends`` (name →
+``module:Class``, a :class:`~droidw_cli.ba.interface.BABackend` subclass).  The
+CPU reference backend is always known, even when its entry point is missing
+(``droidw_backend_cpu`` is imported directly).  Loading a backend class never
+builds anything; :func:`get_backend` builds a CUDA backend's kernels only when
+that backend is chosen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from importlib import import_module
+from importlib.metadata import entry_points
+
+from droidw_cli.ba.interface import BABackend
+from droidw_cli.errors import UserError
+
+ENTRY_POINT_GROUP = "droidw.backends"
+#: always-available backends, used when their entry point is not installed
+BUILTIN = {"cpu": "droidw_backend_cpu:CpuBackend"}
+#: preference order of ``auto``
+AUTO_ORDER = ("cuda", "cpu")
+
+
+@dataclass(frozen=True)
+class BackendInfo:
+    """One row of ``droidw backends``."""
+
+    name: str
+    available: bool
+    reason: str
+
+
+def _targets() -> dict[str, str]:
+    """name → "module:Class" for every known backend (entry points win over built-ins)."""
+    found = dict(BUILTIN)
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        found[ep.name] = ep.value
+    return found
+
+
+def backend_names() -> list[str]:
+    """Every registered backend name: the reference ``cpu`` first, then alphabetically."""
+    return sorted(_targets(), key=lambda n: (n != "cpu", n))
+
+
+def load_backend_class(name: str) -> type[BABackend]:
+    """The backend class registered as ``name`` (ImportError if its package is broken)."""
+    targets = _targets()
+    if name not in targets:
+        raise UserError(f"unknown BA backend '{name}' (known: auto, {', '.join(backend_names())})")
+    module, _, attr = targets[name].partition(":")
+    cls = getattr(import_module(module), attr)
+    if not (isinstance(cls, type) and issubclass(cls, BABackend)):
+        raise UserError(f"BA backend '{name}' ({targets[name]}) is not a BABackend subclass")
+    return cls
+
+
+def backend_info(name: str) -> BackendInfo:
+    """Whether backend ``name`` can run here, and why (never builds kernels)."""
+    try:
+        cls = load_backend_class(name)
+    except UserError as exc:
+        return BackendInfo(name, False, str(exc))
+    except Exception as exc:  # a broken plugin must not break the listing
+        return BackendInfo(name, False, f"import failed: {type(exc).__name__}: {exc}")
+    try:
+        ok, reason = cls.availability()
+    except Exception as exc:
+        return BackendInfo(name, False, f"availability check failed: {type(exc).__name__}: {exc}")
+    return BackendInfo(name, bool(ok), str(reason))
+
+
+def list_backends() -> list[BackendInfo]:
+    """One :class:`BackendInfo` per registered backend."""
+    return [backend_info(n) for n in backend_names()]
+
+
+def _instantiate(name: str) -> BABackend:
+    backend = load_backend_class(name)()
+    ensure = getattr(backend, "ensure_built", None)
+    if callable(ensure):  # compiled backends build (or load their cache) now, not mid-run
+        ensure()
+    return backend
+
+
+def get_backend(name: str = "auto") -> BABackend:
+    """A ready backend: ``auto`` (CUDA when it works, else CPU), ``cpu``, ``cuda`` or a plugin name.
+
+    Choosing a backend that cannot run here raises :class:`UserError` naming the
+    CPU backend as the alternative.
+    """
+    if name == "auto":
+        for candidate in AUTO_ORDER:
+            info = backend_info(candidate)
+            if not info.available:
+                continue
+            try:
+                return _instantiate(candidate)
+            except Exception:  # e.g. the CUDA build failed: fall back to the next one
+                continue
+        raise UserError("no BA backend can run here (the cpu backend should always work: is droidw installed?)")
+    info = backend_info(name)
+    if not info.available:
+        raise UserError(f"the '{name}' BA backend cannot run here ({info.reason}); "
+                        f"use --backend cpu (the CPU backend runs everywhere)")
+    try:
+        return _instantiate(name)
+    except Exception as exc:
+        raise UserError(f"the '{name}' BA backend failed to start ({exc}); "
+                        f"use --backend cpu (the CPU backend runs everywhere)") from exc

@@ -1,0 +1,142 @@
+"""The DROID-W dynamic-uncertainty model and its objective (Eq. 5-9, supp. Eq. 11-13).
+
+Model (one affine map shared by every pixel, C + 1 parameters):
+
+    a = θ[:C]·F + θ[C],      u = log(o + exp(a))      (o = softplus_offset, official 1.1)
+    du/da = exp(a)/(o + exp(a)) = sigmoid(a − log o)
+
+BA weight factor of a pixel with uncertainty u (``mode``):
+
+    clamp   : clamp(1 / max(45 u − 35, 0.1), 0, 1)    (official code; u ≤ 0.8 → 1)
+    inverse : 1 / u                                    (paper Eq. 5)
+
+Objective, over the set K of E_sim edges (|id_i − id_j| ≥ min_frame_gap with
+id = ``BAState.frame_ids``) and the set V of frames they touch:
+
+    e_k     = Σ_p valid · (1 − s) / (u_i(p) · u_ij(p))
+    s       = cos(F_i(p), F_ij(p)) clamped to [0, 1], and 0 where below sim_threshold
+    P_n     = Σ_p log(1 + u_n(p))
+    E_uncer = (1/|V|) Σ_{n∈V} [ γ_data · (1/|K_n|) Σ_{k∈K_n} e_k  +  γ_prior · P_n ]
+
+where F_ij, u_ij are F_j, u_j bilinearly sampled at the current p_ij, ``valid`` is
+"reprojection valid and inside the image", and K_n are the E_sim edges touching
+frame n (as i or as j).  This is the official "gradients averaged per keyframe by
+its number of edges": each keyframe contributes the mean over its edges.  It
+is the same as weighting edge k by ω_k = (1/|K_i| + 1/|K_j|)/|V|.  With
+``average_per_keyframe=False``, ω_k = 1/|K| (plain mean over edges).
+
+Scale: the terms are sums over the pixels of a frame and means over frames
+and edges, so the gradient does not grow with the window size, and the
+official λ = 0.1 moves θ at a useful rate on the 1/8 grid (about 3000 pixels);
+with per-pixel means it would need λ ≈ 300 (measured on the synthetic movers
+problem: both learn the same map, λ·HW is what matters).
+
+The gradient is analytic (features and p_ij are constants):
+
+    ∂e/∂u_i = −t/u_i,   ∂e/∂u_ij = −t/u_ij,   t = ω_k γ_data valid (1 − s)/(u_i u_ij)
+    ∂/∂u_j[corner c] = w_c ∂e/∂u_ij             (bilinear weights w_c)
+    g = Σ_{n,p} G_n(p) · du/da · [F_n(p); 1],    G = Σ of the above + γ_prior/(|V| (1 + u))
+
+and the update is θ ← θ − λ g − η θ.  Backends compute the data part of G
+(``data_grad``, an (N, HW) map) and call :func:`finish_uncertainty_step`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import Tensor
+
+from droidw_cli.ba.params import UncertaintyParams
+from droidw_cli.ba.types import UncertaintyStepResult
+
+#: clamp-mode weight factor: clamp(1 / max(SLOPE·u − OFFSET, FLOOR), 0, 1)
+CLAMP_SLOPE = 45.0
+CLAMP_OFFSET = 35.0
+CLAMP_FLOOR = 0.1
+#: guards the cosine similarity against zero-norm features
+COS_EPS = 1e-8
+
+
+def uncertainty_logits(features: Tensor, theta: Tensor) -> Tensor:
+    """a = θ[:C]·F + θ[C]: features (N, C, H, W) → (N, H, W) float32."""
+    n, c, h, w = features.shape
+    theta = theta.to(device=features.device, dtype=torch.float32)
+    flat = features.reshape(n, c, h * w).float()
+    return (torch.matmul(theta[:-1], flat) + theta[-1]).reshape(n, h, w)
+
+
+def uncertainty_from_logits(logits: Tensor, offset: float) -> Tensor:
+    """u = log(offset + exp(a)), computed stably."""
+    return torch.logaddexp(logits, torch.full_like(logits, math.log(offset)))
+
+
+def uncertainty_slope(logits: Tensor, offset: float) -> Tensor:
+    """du/da = sigmoid(a − log offset)."""
+    return torch.sigmoid(logits - math.log(offset))
+
+
+def uncertainty_map(features: Tensor, theta: Tensor, offset: float = 1.1) -> Tensor:
+    """u (N, H, W) of every pixel (e.g. for a new keyframe, or for export)."""
+    return uncertainty_from_logits(uncertainty_logits(features, theta), offset)
+
+
+def weight_factor(u: Tensor, mode: str) -> Tensor:
+    """The BA confidence multiplier of uncertainty u (see the module docstring)."""
+    if mode == "clamp":
+        return (1.0 / (CLAMP_SLOPE * u - CLAMP_OFFSET).clamp_min(CLAMP_FLOOR)).clamp(0.0, 1.0)
+    if mode == "inverse":
+        return 1.0 / u
+    raise ValueError(f"unknown uncertainty mode {mode!r}")
+
+
+def similarity_edge_mask(ii: Tensor, jj: Tensor, frame_ids: Tensor, min_gap: int) -> Tensor:
+    """(E,) bool: the edges used by E_sim, |id[ii] − id[jj]| ≥ min_gap."""
+    return (frame_ids[ii] - frame_ids[jj]).abs() >= min_gap
+
+
+def edge_objective_weights(ii: Tensor, jj: Tensor, num_frames: int, per_keyframe: bool) -> tuple[Tensor, Tensor]:
+    """(ω (K,) float32, involved (N,) bool) for the E_sim edges ii, jj (see module docstring)."""
+    counts = torch.zeros(num_frames, device=ii.device, dtype=torch.float32)
+    ones = torch.ones(ii.shape[0], device=ii.device, dtype=torch.float32)
+    counts.index_add_(0, ii, ones).index_add_(0, jj, ones)
+    involved = counts > 0
+    if not per_keyframe:
+        return ones / max(ii.shape[0], 1), involved
+    nv = involved.sum().clamp_min(1).float()
+    return (1.0 / counts[ii] + 1.0 / counts[jj]) / nv, involved
+
+
+def similarity_score(cos: Tensor, threshold: float) -> Tensor:
+    """s = clamp(cos, 0, 1), set to 0 below ``threshold``."""
+    s = cos.clamp(0.0, 1.0)
+    return torch.where(s < threshold, torch.zeros_like(s), s)
+
+
+def theta_gradient(grad_u: Tensor, slope: Tensor, features: Tensor) -> Tensor:
+    """g = Σ G · du/da · [F; 1] for G, du/da (N, HW) and features (N, C, H, W) → (C + 1,)."""
+    n, c = features.shape[:2]
+    ga = (grad_u * slope).reshape(n, 1, -1)
+    gf = torch.bmm(features.reshape(n, c, -1).float(), ga.transpose(1, 2)).sum(0).squeeze(-1)
+    return torch.cat((gf, ga.sum().reshape(1)))
+
+
+def finish_uncertainty_step(state_theta: Tensor, features: Tensor, logits: Tensor, data_grad: Tensor,
+                            data_loss: Tensor, involved: Tensor, params: UncertaintyParams) -> UncertaintyStepResult:
+    """Add E_prior to the backend's data term, form g and take the step θ ← θ − λg − ηθ.
+
+    logits (N, H, W); data_grad (N, HW) = ∂(γ_data·E_sim)/∂u; data_loss: 0-d tensor;
+    involved (N,) bool = V.  Returns the new θ (float32) and E_uncer before the step.
+    """
+    n = logits.shape[0]
+    flat = logits.reshape(n, -1)
+    u = uncertainty_from_logits(flat, params.softplus_offset)
+    scale = params.gamma_prior / involved.sum().clamp_min(1).float()
+    prior_mask = involved.float().unsqueeze(1)
+    prior_loss = (torch.log1p(u) * prior_mask).sum() * scale
+    grad_u = data_grad + prior_mask * scale / (1.0 + u)
+    g = theta_gradient(grad_u, uncertainty_slope(flat, params.softplus_offset), features)
+    theta = state_theta.to(device=g.device, dtype=torch.float32)
+    new_theta = theta - params.lr * g - params.weight_decay * theta
+    return UncertaintyStepResult(theta=new_theta, loss=float(data_loss + prior_loss))
