@@ -27,7 +27,8 @@ def _autograd_loss(state: BAState, edges: EdgeSet, theta: torch.Tensor, unc: Unc
     """E_uncer written independently (grid_sample, cosine_similarity) for autograd."""
     n, c, h, w = state.features.shape
     feats = state.features.double()
-    a = torch.einsum("c,nchw->nhw", theta[:-1], feats) + theta[-1]
+    inputs = feats if state.map_inputs is None else torch.cat((feats, state.map_inputs.double()), 1)
+    a = torch.einsum("c,nchw->nhw", theta[:-1], inputs) + theta[-1]
     u = torch.log(unc.softplus_offset + torch.exp(a))
     ids = state.keyframe_ids()
     keep = (ids[edges.ii] - ids[edges.jj]).abs() >= unc.min_frame_gap
@@ -39,6 +40,9 @@ def _autograd_loss(state: BAState, edges: EdgeSet, theta: torch.Tensor, unc: Unc
     fij = tf.grid_sample(feats[jj], grid, align_corners=True, padding_mode="border")
     uij = tf.grid_sample(u[jj].unsqueeze(1), grid, align_corners=True, padding_mode="border")[:, 0]
     s = tf.cosine_similarity(feats[ii], fij, dim=1).clamp(0, 1)
+    if unc.geo_sigma > 0:
+        r = (edges.target[keep].double() - coords).norm(dim=-1)
+        s = s * torch.exp(-(r / unc.geo_sigma) ** 2)
     s = torch.where(s < unc.sim_threshold, torch.zeros_like(s), s)
     e_k = (valid * (1 - s) / (u[ii] * uij)).sum((1, 2))
     counts = torch.bincount(torch.cat((ii, jj)), minlength=n).double()
@@ -75,6 +79,28 @@ def test_uncertainty_gradient_matches_autograd(small_problem, per_keyframe, fram
     assert res.loss == pytest.approx(float(loss.detach()), rel=1e-4)
     assert torch.allclose(res.theta.double(), expect, rtol=1e-4, atol=1e-5)
     assert float(grad.abs().max()) > 1e-3  # the comparison is not trivially 0 = 0
+
+
+@pytest.mark.parametrize("geo_sigma", [0.0, 0.7])
+@pytest.mark.parametrize("with_inputs", [False, True])
+def test_geometric_similarity_and_map_inputs_match_autograd(small_problem, geo_sigma, with_inputs):
+    """droidw's extensions: the geometric factor of s and extra affine-map inputs X."""
+    state, edges = small_problem
+    n, _, h, w = state.features.shape
+    if with_inputs:
+        g = torch.Generator().manual_seed(11)
+        state = state.with_(map_inputs=torch.rand(n, 2, h, w, generator=g),
+                            theta=torch.cat((state.theta[:-1], torch.tensor([0.3, -0.2]), state.theta[-1:])))
+    unc = UncertaintyParams(geo_sigma=geo_sigma, sim_threshold=0.2)
+    res = CpuBackend().uncertainty_step(state, edges, BAParams(uncertainty=unc))
+    theta = state.theta.double().clone().requires_grad_(True)
+    loss = _autograd_loss(state, edges, theta, unc)
+    grad, = torch.autograd.grad(loss, theta)
+    expect = state.theta.double() - unc.lr * grad - unc.weight_decay * state.theta.double()
+    assert res.loss == pytest.approx(float(loss.detach()), rel=1e-4)
+    assert torch.allclose(res.theta.double(), expect, rtol=1e-4, atol=1e-5)
+    if with_inputs:
+        assert float(grad[-3:-1].abs().max()) > 1e-4  # the extra inputs get a real gradient
 
 
 def test_no_similarity_edges_means_no_step(small_problem):

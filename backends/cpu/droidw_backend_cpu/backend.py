@@ -67,6 +67,7 @@ class CpuBackend(BABackend):
             theta=None if state.theta is None else state.theta.to(**f32),
             depth_prior=None if state.depth_prior is None else state.depth_prior.to(**f32),
             frame_ids=None if state.frame_ids is None else state.frame_ids.to(device=dev, dtype=torch.long),
+            map_inputs=None if state.map_inputs is None else state.map_inputs.to(**f32),
         )
         if edges is None:
             return st, None
@@ -83,11 +84,12 @@ class CpuBackend(BABackend):
         return linearize(state.poses, state.disps, state.intrinsics, edges.ii, edges.jj, edges.target,
                          edges.weight, u_map, params, layout, self.chunk_bytes)
 
-    def _similarity_term(self, state: BAState, ii: Tensor, jj: Tensor, omega: Tensor, u: Tensor,
+    def _similarity_term(self, state: BAState, ii: Tensor, jj: Tensor, target: Tensor, omega: Tensor, u: Tensor,
                          params: BAParams) -> tuple[Tensor, Tensor]:
         unc = params.uncertainty
         return similarity_data_term(state.poses, state.disps, state.intrinsics, ii, jj, omega, state.features, u,
-                                    unc.gamma_data, unc.sim_threshold, params.min_depth, self.feature_chunk_bytes)
+                                    unc.gamma_data, unc.sim_threshold, params.min_depth, self.feature_chunk_bytes,
+                                    target=target, geo_sigma=unc.geo_sigma)
 
     # --------------------------------------------------------------- interface
     def reproject(self, state: BAState, ii: Tensor, jj: Tensor, min_depth: float = 0.05) -> tuple[Tensor, Tensor]:
@@ -106,7 +108,7 @@ class CpuBackend(BABackend):
         unc = params.uncertainty
         if not unc.enable or state.features is None or state.theta is None:
             return None
-        logits = uncertainty_logits(state.features, state.theta)
+        logits = uncertainty_logits(state.features, state.theta, state.map_inputs)
         return uncertainty_from_logits(logits, unc.softplus_offset).reshape(state.num_frames, -1)
 
     def ba_step(self, state: BAState, edges: EdgeSet, params: BAParams) -> BAStepResult:
@@ -127,7 +129,8 @@ class CpuBackend(BABackend):
             return UncertaintyStepResult(theta=st.theta.clone(), loss=0.0)
         ii, jj = ed.ii[keep], ed.jj[keep]
         omega, involved = edge_objective_weights(ii, jj, st.num_frames, unc.average_per_keyframe)
-        logits = uncertainty_logits(st.features, st.theta)
+        logits = uncertainty_logits(st.features, st.theta, st.map_inputs)
         u = uncertainty_from_logits(logits, unc.softplus_offset).reshape(st.num_frames, -1)
-        data_grad, data_loss = self._similarity_term(st, ii, jj, omega, u, params)
-        return finish_uncertainty_step(st.theta, st.features, logits, data_grad, data_loss, involved, unc)
+        data_grad, data_loss = self._similarity_term(st, ii, jj, ed.target[keep], omega, u, params)
+        return finish_uncertainty_step(st.theta, st.features, logits, data_grad, data_loss, involved, unc,
+                                       st.map_inputs)

@@ -28,10 +28,13 @@ _FEATURE_TEMPS = 3
 
 def similarity_data_term(poses: Tensor, disps: Tensor, intrinsics: Tensor, ii: Tensor, jj: Tensor,
                          omega: Tensor, features: Tensor, u: Tensor, gamma_data: float, sim_threshold: float,
-                         min_depth: float, chunk_bytes: int = DEFAULT_FEATURE_CHUNK_BYTES) -> tuple[Tensor, Tensor]:
+                         min_depth: float, chunk_bytes: int = DEFAULT_FEATURE_CHUNK_BYTES,
+                         target: Tensor | None = None, geo_sigma: float = 0.0) -> tuple[Tensor, Tensor]:
     """(G (N, HW) = ∂(γ_data E_sim)/∂u, γ_data E_sim as a 0-d tensor) over the E_sim edges ii, jj.
 
-    features (N, C, H, W) any float dtype; u (N, HW) float32; omega (K,) edge weights.
+    features (N, C, H, W) any float dtype; u (N, HW) float32; omega (K,) edge weights;
+    target (K, H, W, 2) the correspondence targets of these edges, used by the
+    geometric factor of s when ``geo_sigma`` > 0.
     """
     n, c, h, w = features.shape
     hw = h * w
@@ -55,7 +58,11 @@ def similarity_data_term(poses: Tensor, disps: Tensor, intrinsics: Tensor, ii: T
             fij += wts[corner].unsqueeze(2) * flat[idx[corner]]
         dot = (fij * fcl[ic]).sum(2)
         cos = dot / (fij.norm(dim=2) * fnorm[ic]).clamp_min(COS_EPS)
-        sim = similarity_score(cos, sim_threshold)
+        residual = None
+        if target is not None and geo_sigma > 0:
+            tc = target[s0:s0 + size].reshape(-1, hw, 2)
+            residual = torch.hypot(tc[..., 0] - x, tc[..., 1] - y)
+        sim = similarity_score(cos, sim_threshold, residual, geo_sigma)
         iflat = ic.unsqueeze(1) * hw + pix  # (ec, HW)
         ui = uflat[iflat]
         uij = (uflat[idx] * wts).sum(0)

@@ -102,7 +102,7 @@ class CudaBackend(CpuBackend):
         assert erows.shape[1] == POSE_DOF + FOCAL_DOF[params.optimize_focal]
         return LinearSystem(hess, grad, eblocks, cdiag, wvec, cost.reshape(()))
 
-    def _similarity_term(self, state: BAState, ii: Tensor, jj: Tensor, omega: Tensor, u: Tensor,
+    def _similarity_term(self, state: BAState, ii: Tensor, jj: Tensor, target: Tensor, omega: Tensor, u: Tensor,
                          params: BAParams) -> tuple[Tensor, Tensor]:
         k = build.load_kernels()
         unc = params.uncertainty
@@ -111,6 +111,7 @@ class CudaBackend(CpuBackend):
         cfg.min_depth = params.min_depth
         cfg.gamma_data = unc.gamma_data
         cfg.sim_threshold = unc.sim_threshold
+        cfg.geo_sigma = unc.geo_sigma
         inputs = k.SimilarityInputs()
         inputs.rel = _relative(state.poses, ii, jj)[0]
         inputs.disps = state.disps.contiguous()
@@ -118,5 +119,7 @@ class CudaBackend(CpuBackend):
         inputs.omega = omega.float().contiguous()
         inputs.features = state.features.float().contiguous()
         inputs.u = u.contiguous()
+        if unc.geo_sigma > 0:
+            inputs.target = target.float().reshape(target.shape[0], -1, 2).contiguous()
         grad, loss = k.similarity(cfg, inputs)
         return grad, loss.reshape(())

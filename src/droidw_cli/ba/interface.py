@@ -128,8 +128,15 @@ def validate_inputs(state: BAState, edges: EdgeSet, need_features: bool = False)
     if state.features is not None and state.theta is not None:
         if state.features.ndim != 4 or state.features.shape[0] != n or tuple(state.features.shape[2:]) != (h, w):
             raise ValueError(f"features must have shape (N={n}, C, H={h}, W={w}), got {tuple(state.features.shape)}")
-        if state.theta.shape != (state.features.shape[1] + 1,):
-            raise ValueError(f"theta must have shape (C+1={state.features.shape[1] + 1},), got {tuple(state.theta.shape)}")
+        m = 0
+        if state.map_inputs is not None:
+            if state.map_inputs.ndim != 4 or state.map_inputs.shape[0] != n or tuple(state.map_inputs.shape[2:]) != (h, w):
+                raise ValueError(f"map_inputs must have shape (N={n}, M, H={h}, W={w}), "
+                                 f"got {tuple(state.map_inputs.shape)}")
+            m = int(state.map_inputs.shape[1])
+        width = state.features.shape[1] + m + 1
+        if state.theta.shape != (width,):
+            raise ValueError(f"theta must have shape (C+M+1={width},), got {tuple(state.theta.shape)}")
         if not _all_finite(state.theta):
             raise ValueError("theta contains NaN or Inf")
     if state.frame_ids is not None and state.frame_ids.shape != (n,):

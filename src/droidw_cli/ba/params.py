@@ -36,6 +36,12 @@ class UncertaintyParams:
         average_per_keyframe: average the data term per keyframe by its number of
             E_sim edges (see :mod:`droidw_cli.ba.uncertainty`); False gives the plain
             mean over edges.
+        geo_sigma: droidw extension, 0 = off (pure DROID-W).  s is multiplied by
+            exp(−(r/geo_sigma)²), r = ‖p*_ij − p_ij‖ in grid pixels, so a pixel is
+            "consistent" only if it also lands where its correspondence says.
+        evidence: droidw extension (used by the tracker): append per-pixel evidence
+            channels (multi-view flow residual, correspondence confidence) to the
+            affine map's inputs, u = softplus(θ·[F; X] + b).
     """
 
     enable: bool = True
@@ -51,13 +57,15 @@ class UncertaintyParams:
     warmup_iters: int = 8
     freeze_in_global: bool = True
     average_per_keyframe: bool = True
+    geo_sigma: float = 0.0
+    evidence: bool = False
 
     def __post_init__(self) -> None:
         if self.mode not in UNCERTAINTY_MODES:
             raise ValueError(f"uncertainty.mode must be one of {UNCERTAINTY_MODES}, got {self.mode!r}")
         if self.softplus_offset <= 0:
             raise ValueError("uncertainty.softplus_offset must be > 0")
-        if self.min_frame_gap < 0 or self.lr < 0 or self.weight_decay < 0:
+        if self.min_frame_gap < 0 or self.lr < 0 or self.weight_decay < 0 or self.geo_sigma < 0:
             raise ValueError("uncertainty.min_frame_gap, lr and weight_decay must be >= 0")
 
 

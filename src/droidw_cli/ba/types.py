@@ -9,7 +9,11 @@ Conventions (all on the 1/8-resolution grid, H × W):
   (u, v) of the grid has its centre at x = u, y = v
   (see :func:`droidw_cli.geometry.camera.scale_intrinsics`).
 * ``features``: (N, C, H, W) dense features F_t (float16 or float32).
-* ``theta``: (C + 1,) float32 affine map, u = softplus(θ[:C]·F + θ[C]).
+* ``map_inputs``: optional (N, M, H, W) extra per-pixel inputs of the affine
+  uncertainty map only (droidw's evidence channels, e.g. the multi-view flow
+  residual); they take no part in the feature similarity s.
+* ``theta``: (C + M + 1,) float32 affine map, u = softplus(θ·[F; X] + b), the
+  bias b = θ[-1] last.
 * ``depth_prior``: (N, H, W) prior *disparity* D_t; 0 where there is none.
 * ``frame_ids``: (N,) int64 absolute keyframe indices, used only for the
   |i − j| ≥ min_frame_gap test of E_sim; None means positions 0..N−1.
@@ -37,6 +41,7 @@ class BAState:
     theta: Tensor | None = None
     depth_prior: Tensor | None = None
     frame_ids: Tensor | None = None
+    map_inputs: Tensor | None = None
 
     @property
     def num_frames(self) -> int:

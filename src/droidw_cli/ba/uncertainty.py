@@ -59,11 +59,20 @@ CLAMP_FLOOR = 0.1
 COS_EPS = 1e-8
 
 
-def uncertainty_logits(features: Tensor, theta: Tensor) -> Tensor:
-    """a = θ[:C]·F + θ[C]: features (N, C, H, W) → (N, H, W) float32."""
+def map_input_matrix(features: Tensor, map_inputs: Tensor | None = None) -> Tensor:
+    """The affine map's per-pixel inputs [F; X] as (N, C + M, HW) float32."""
     n, c, h, w = features.shape
-    theta = theta.to(device=features.device, dtype=torch.float32)
     flat = features.reshape(n, c, h * w).float()
+    if map_inputs is None:
+        return flat
+    return torch.cat((flat, map_inputs.reshape(n, -1, h * w).to(flat)), 1)
+
+
+def uncertainty_logits(features: Tensor, theta: Tensor, map_inputs: Tensor | None = None) -> Tensor:
+    """a = θ[:-1]·[F; X] + θ[-1]: features (N, C, H, W) (+ map inputs (N, M, H, W)) → (N, H, W)."""
+    n, _, h, w = features.shape
+    theta = theta.to(device=features.device, dtype=torch.float32)
+    flat = map_input_matrix(features, map_inputs)
     return (torch.matmul(theta[:-1], flat) + theta[-1]).reshape(n, h, w)
 
 
@@ -77,9 +86,9 @@ def uncertainty_slope(logits: Tensor, offset: float) -> Tensor:
     return torch.sigmoid(logits - math.log(offset))
 
 
-def uncertainty_map(features: Tensor, theta: Tensor, offset: float = 1.1) -> Tensor:
+def uncertainty_map(features: Tensor, theta: Tensor, offset: float = 1.1, map_inputs: Tensor | None = None) -> Tensor:
     """u (N, H, W) of every pixel (e.g. for a new keyframe, or for export)."""
-    return uncertainty_from_logits(uncertainty_logits(features, theta), offset)
+    return uncertainty_from_logits(uncertainty_logits(features, theta, map_inputs), offset)
 
 
 def weight_factor(u: Tensor, mode: str) -> Tensor:
@@ -108,22 +117,30 @@ def edge_objective_weights(ii: Tensor, jj: Tensor, num_frames: int, per_keyframe
     return (1.0 / counts[ii] + 1.0 / counts[jj]) / nv, involved
 
 
-def similarity_score(cos: Tensor, threshold: float) -> Tensor:
-    """s = clamp(cos, 0, 1), set to 0 below ``threshold``."""
+def similarity_score(cos: Tensor, threshold: float, residual: Tensor | None = None, geo_sigma: float = 0.0) -> Tensor:
+    """s = clamp(cos, 0, 1) · exp(−(r/σ_g)²), set to 0 below ``threshold``.
+
+    The geometric factor (droidw's extension, off when σ_g = 0) makes a pixel
+    consistent only if it also lands where its correspondence target says:
+    r = ‖p*_ij − p_ij‖ in grid pixels.
+    """
     s = cos.clamp(0.0, 1.0)
+    if residual is not None and geo_sigma > 0:
+        s = s * torch.exp(-(residual / geo_sigma) ** 2)
     return torch.where(s < threshold, torch.zeros_like(s), s)
 
 
-def theta_gradient(grad_u: Tensor, slope: Tensor, features: Tensor) -> Tensor:
-    """g = Σ G · du/da · [F; 1] for G, du/da (N, HW) and features (N, C, H, W) → (C + 1,)."""
-    n, c = features.shape[:2]
+def theta_gradient(grad_u: Tensor, slope: Tensor, features: Tensor, map_inputs: Tensor | None = None) -> Tensor:
+    """g = Σ G · du/da · [F; X; 1] for G, du/da (N, HW) → (C + M + 1,)."""
+    n = features.shape[0]
     ga = (grad_u * slope).reshape(n, 1, -1)
-    gf = torch.bmm(features.reshape(n, c, -1).float(), ga.transpose(1, 2)).sum(0).squeeze(-1)
+    gf = torch.bmm(map_input_matrix(features, map_inputs), ga.transpose(1, 2)).sum(0).squeeze(-1)
     return torch.cat((gf, ga.sum().reshape(1)))
 
 
 def finish_uncertainty_step(state_theta: Tensor, features: Tensor, logits: Tensor, data_grad: Tensor,
-                            data_loss: Tensor, involved: Tensor, params: UncertaintyParams) -> UncertaintyStepResult:
+                            data_loss: Tensor, involved: Tensor, params: UncertaintyParams,
+                            map_inputs: Tensor | None = None) -> UncertaintyStepResult:
     """Add E_prior to the backend's data term, form g and take the step θ ← θ − λg − ηθ.
 
     logits (N, H, W); data_grad (N, HW) = ∂(γ_data·E_sim)/∂u; data_loss: 0-d tensor;
@@ -136,7 +153,7 @@ def finish_uncertainty_step(state_theta: Tensor, features: Tensor, logits: Tenso
     prior_mask = involved.float().unsqueeze(1)
     prior_loss = (torch.log1p(u) * prior_mask).sum() * scale
     grad_u = data_grad + prior_mask * scale / (1.0 + u)
-    g = theta_gradient(grad_u, uncertainty_slope(flat, params.softplus_offset), features)
+    g = theta_gradient(grad_u, uncertainty_slope(flat, params.softplus_offset), features, map_inputs)
     theta = state_theta.to(device=g.device, dtype=torch.float32)
     new_theta = theta - params.lr * g - params.weight_decay * theta
     return UncertaintyStepResult(theta=new_theta, loss=float(data_loss + prior_loss))

@@ -27,9 +27,10 @@ from droidw_cli.slam.poses import interpolate
 class TrajectoryFiller:
     """Collects frames between keyframes and solves their poses gap by gap."""
 
-    def __init__(self, frontend: Frontend, iters: int):
+    def __init__(self, frontend: Frontend, iters: int, evidence: torch.Tensor | None = None):
         self.fe = frontend
         self.iters = iters
+        self.evidence = evidence  # (K, M, h, w) keyframe evidence channels, when the map uses them
         self.poses: dict[int, torch.Tensor] = {}  # frame position → world-to-camera (7,)
         self._kf_pos = {fi: k for k, fi in enumerate(frontend.buffer.frame_index)}
         self._pending: list[tuple[int, float, np.ndarray]] = []
@@ -90,13 +91,18 @@ class TrajectoryFiller:
         edges = EdgeSet(torch.tensor(ii), torch.tensor(jj), torch.stack(targets).float(), torch.stack(weights).float())
         h, w = buf.grid
         disps = torch.cat([buf.disps[kf], torch.ones(m, h, w)])
-        feats = theta = None
+        feats = theta = extra = None
         unc = fe.params.uncertainty
         if unc.enable and buf.features is not None and fe.shared.theta is not None:
             c = buf.features.shape[1]
             feats = torch.cat([buf.features[kf].float(), torch.zeros(m, c, h, w)])
             theta = fe.shared.theta
-        state = BAState(torch.cat([buf.poses[kf], init]), disps, fe.shared.intrinsics.clone(), feats, theta)
+            if self.evidence is not None:
+                extra = torch.cat([self.evidence[kf], torch.zeros(m, self.evidence.shape[1], h, w)])
+            elif unc.evidence:  # θ expects evidence inputs but none could be computed: neutral zeros
+                extra = torch.zeros(len(kf) + m, theta.shape[0] - c - 1, h, w)
+        state = BAState(torch.cat([buf.poses[kf], init]), disps, fe.shared.intrinsics.clone(), feats, theta,
+                        map_inputs=extra)
         params = dataclasses.replace(fe.params, t0=na, motion_only=True, optimize_focal="none",
                                      uncertainty=dataclasses.replace(unc, bidirectional=False))
         for _ in range(self.iters):

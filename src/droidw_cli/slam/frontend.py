@@ -20,8 +20,9 @@ from droidw_cli.ba.interface import BABackend
 from droidw_cli.ba.params import BAParams
 from droidw_cli.config import TrackConfig
 from droidw_cli.slam import graph
+from droidw_cli.slam.evidence import EVIDENCE_CHANNELS, evidence_maps
 from droidw_cli.slam.keyframes import KeyframeBuffer
-from droidw_cli.slam.optimizer import SharedState, run_window
+from droidw_cli.slam.optimizer import SharedState, run_window, window_state
 from droidw_cli.slam.poses import extrapolate
 
 
@@ -37,7 +38,8 @@ class Frontend:
         self.correspondence = correspondence
         self.buffer = KeyframeBuffer(grid, feature_channels, torch.float16 if cfg.features.half else torch.float32)
         self.cache = graph.EdgeCache()
-        theta = torch.zeros(feature_channels + 1) if feature_channels else None
+        extra = EVIDENCE_CHANNELS if params.uncertainty.evidence else 0
+        theta = torch.zeros(feature_channels + extra + 1) if feature_channels else None
         self.shared = SharedState(intrinsics8.clone().float(), theta)
         self.images: dict[int, np.ndarray] = {}
         self.initialised = False
@@ -52,8 +54,6 @@ class Frontend:
         jj = torch.tensor([p[1] for p in pairs])
         lo = int(min(ii.min(), jj.min()))
         hi = int(max(ii.max(), jj.max())) + 1
-        from droidw_cli.slam.optimizer import window_state
-
         state = window_state(self.buffer, lo, hi, self.shared, with_features=False)
         coords, valid = self.backend.reproject(state, ii - lo, jj - lo, self.params.min_depth)
         return coords - self._grid, valid
@@ -134,6 +134,17 @@ class Frontend:
         window = [p for p in self.cache.pairs() if min(p) >= lo]
         window = graph.cap_edges(window, f.max_edges)
         self._optimise(lo, k + 1, window, f.iters1 + f.iters2)
+
+    def evidence(self) -> torch.Tensor | None:
+        """Evidence channels of every keyframe from all cached edges (None when unused)."""
+        unc = self.params.uncertainty
+        n = len(self.buffer)
+        if not (unc.enable and unc.evidence) or self.buffer.features is None:
+            return None
+        if n < 2 or len(self.cache) == 0:
+            return torch.zeros(n, EVIDENCE_CHANNELS, *self.buffer.grid)
+        state = window_state(self.buffer, 0, n, self.shared, with_features=False)
+        return evidence_maps(self.backend, state, self.cache.edge_set(self.cache.pairs()), self.params.min_depth)
 
     def _evict(self, k: int) -> None:
         """Drop working-resolution images that left the window."""

@@ -12,12 +12,12 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-import torch
 from torch import Tensor
 
 from droidw_cli.ba.interface import BABackend
 from droidw_cli.ba.params import BAParams
 from droidw_cli.ba.types import BAState, EdgeSet
+from droidw_cli.slam.evidence import evidence_maps
 from droidw_cli.slam.keyframes import KeyframeBuffer
 
 
@@ -55,6 +55,8 @@ def run_window(backend: BABackend, buffer: KeyframeBuffer, lo: int, hi: int, edg
     cost = float("nan")
     for _ in range(iters):
         weighted = use_unc and shared.iterations >= unc.warmup_iters
+        if use_unc and unc.evidence:
+            state = state.with_(map_inputs=evidence_maps(backend, state, edges, params.min_depth))
         if weighted and optimize_theta:
             state = state.with_(theta=backend.uncertainty_step(state, edges, params).theta)
         step_params = dataclasses.replace(params, t0=fixed, uncertainty=dataclasses.replace(unc, enable=weighted))
@@ -69,8 +71,3 @@ def run_window(backend: BABackend, buffer: KeyframeBuffer, lo: int, hi: int, edg
     return cost
 
 
-def uncertainty_maps(features: Tensor, theta: Tensor, offset: float) -> Tensor:
-    """u = log(offset + exp(θ·F + b)) for (N, C, h, w) features → (N, h, w) (DROID-W Eq. 6)."""
-    f = features.float()
-    z = torch.einsum("nchw,c->nhw", f, theta[:-1]) + theta[-1]
-    return torch.log(offset + torch.exp(z))

@@ -28,7 +28,7 @@ from droidw_cli.slam.backend import global_ba
 from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.frontend import Frontend
 from droidw_cli.slam.motion_filter import MotionFilter
-from droidw_cli.slam.optimizer import uncertainty_maps
+from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.timing import StageTimer, Timed
 
@@ -156,7 +156,8 @@ class Tracker:
             with timer("global_ba"):
                 global_ba(fe, cfg.backend)
 
-            filler = TrajectoryFiller(fe, cfg.filler.iters)
+            evidence = fe.evidence()
+            filler = TrajectoryFiller(fe, cfg.filler.iters, evidence)
             with timer("filler"):
                 if fe.initialised:
                     bar = tqdm(total=len(frames), desc="fill", unit="frame", disable=not self.progress, dynamic_ncols=True)
@@ -177,7 +178,8 @@ class Tracker:
         k_work = unscale_intrinsics(fe.shared.intrinsics.numpy().astype(np.float64), BA_SCALE)
         unc = feats_np = theta = None
         if buf.features is not None and fe.shared.theta is not None:
-            unc = uncertainty_maps(buf.features[:n_kf], fe.shared.theta, cfg.uncertainty.softplus_offset).numpy()
+            unc = uncertainty_map(buf.features[:n_kf].float(), fe.shared.theta, cfg.uncertainty.softplus_offset,
+                                  evidence).numpy()
             feats_np = buf.features[:n_kf].to(torch.float16).numpy()
             theta = fe.shared.theta.numpy().copy()
         wall = time.perf_counter() - t_start

@@ -26,7 +26,8 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
       .def_readwrite("cy", &droidw::SimilarityConfig::cy)
       .def_readwrite("min_depth", &droidw::SimilarityConfig::min_depth)
       .def_readwrite("gamma_data", &droidw::SimilarityConfig::gamma_data)
-      .def_readwrite("sim_threshold", &droidw::SimilarityConfig::sim_threshold);
+      .def_readwrite("sim_threshold", &droidw::SimilarityConfig::sim_threshold)
+      .def_readwrite("geo_sigma", &droidw::SimilarityConfig::geo_sigma);
   py::class_<droidw::LinearizeInputs>(m, "LinearizeInputs")
       .def(py::init<>())
       .def_readwrite("rel", &droidw::LinearizeInputs::rel)
@@ -44,7 +45,8 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
       .def_readwrite("jj", &droidw::SimilarityInputs::jj)
       .def_readwrite("omega", &droidw::SimilarityInputs::omega)
       .def_readwrite("features", &droidw::SimilarityInputs::features)
-      .def_readwrite("u", &droidw::SimilarityInputs::u);
+      .def_readwrite("u", &droidw::SimilarityInputs::u)
+      .def_readwrite("target", &droidw::SimilarityInputs::target);
   m.attr("CLAMP_SLOPE") = droidw::kClampSlope;
   m.attr("CLAMP_OFFSET") = droidw::kClampOffset;
   m.attr("CLAMP_FLOOR") = droidw::kClampFloor;

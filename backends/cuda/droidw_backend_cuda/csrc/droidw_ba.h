@@ -41,6 +41,7 @@ struct SimilarityConfig {
   float min_depth = 0.05f;
   float gamma_data = 0.1f;
   float sim_threshold = 0.5f;
+  float geo_sigma = 0.0f;  // > 0: s *= exp(-(r / geo_sigma)^2), r = |target - p_ij| (grid px)
 };
 
 // Tensor inputs of the linearisation; umap may be undefined (unweighted BA).
@@ -50,7 +51,7 @@ struct LinearizeInputs {
 
 // Tensor inputs of the uncertainty data term (sim edges only).
 struct SimilarityInputs {
-  torch::Tensor rel, disps, ii, jj, omega, features, u;
+  torch::Tensor rel, disps, ii, jj, omega, features, u, target;  // target (K, HW, 2), used when geo_sigma > 0
 };
 
 // Returns {hess_j (E, KJ, KJ), grad_j (E, KJ), erows (E, KJ, HW) or empty, cdiag (N, HW), wvec (N, HW), cost (1)}.

@@ -14,7 +14,8 @@ __global__ void similarity_kernel(SimilarityConfig cfg, int hw, int height, int 
                                   const float* __restrict__ rel, const float* __restrict__ disps,
                                   const int64_t* __restrict__ ii, const int64_t* __restrict__ jj,
                                   const float* __restrict__ omega, const float* __restrict__ feats,
-                                  const float* __restrict__ u, float* __restrict__ grad, float* __restrict__ loss) {
+                                  const float* __restrict__ u, const float* __restrict__ target,
+                                  float* __restrict__ grad, float* __restrict__ loss) {
   const int e = blockIdx.y;
   const int p = blockIdx.x * blockDim.x + threadIdx.x;
   float t = 0.0f;
@@ -38,6 +39,11 @@ __global__ void similarity_kernel(SimilarityConfig cfg, int hw, int height, int 
     }
     const float cosv = dot / fmaxf(sqrtf(nij) * sqrtf(ni), kCosEps);
     float sim = fminf(fmaxf(cosv, 0.0f), 1.0f);
+    if (target != nullptr && cfg.geo_sigma > 0.0f) {
+      const float* tp = target + (static_cast<int64_t>(e) * hw + p) * 2;
+      const float r = hypotf(tp[0] - o.px, tp[1] - o.py) / cfg.geo_sigma;
+      sim *= expf(-r * r);
+    }
     if (sim < cfg.sim_threshold) sim = 0.0f;
     const float* uj = u + fj * hw;
     const float ui = u[fi * hw + p];
@@ -78,6 +84,11 @@ std::vector<torch::Tensor> similarity_cuda(const SimilarityConfig& cfg, const Si
   check(in.features, "features", at::kFloat);
   check(in.u, "u", at::kFloat);
   TORCH_CHECK(in.features.dim() == 4, "features must be (N, C, H, W)");
+  const bool with_target = cfg.geo_sigma > 0.0f;
+  if (with_target) {
+    check(in.target, "target", at::kFloat);
+    TORCH_CHECK(in.target.size(0) == in.ii.size(0), "target must have one row per sim edge");
+  }
   TORCH_CHECK(in.ii.size(0) <= kMaxGridY, "too many edges for one launch");
   const c10::cuda::CUDAGuard guard(in.disps.device());
   const int n = static_cast<int>(in.features.size(0)), channels = static_cast<int>(in.features.size(1));
@@ -92,7 +103,8 @@ std::vector<torch::Tensor> similarity_cuda(const SimilarityConfig& cfg, const Si
     similarity_kernel<<<grid, kThreads, 0, stream>>>(
         cfg, hw, height, width, channels, in.rel.data_ptr<float>(), in.disps.data_ptr<float>(),
         in.ii.data_ptr<int64_t>(), in.jj.data_ptr<int64_t>(), in.omega.data_ptr<float>(),
-        in.features.data_ptr<float>(), in.u.data_ptr<float>(), grad.data_ptr<float>(), loss.data_ptr<float>());
+        in.features.data_ptr<float>(), in.u.data_ptr<float>(),
+        with_target ? in.target.data_ptr<float>() : nullptr, grad.data_ptr<float>(), loss.data_ptr<float>());
     C10_CUDA_KERNEL_LAUNCH_CHECK();
   }
   return {grad, loss};
