@@ -9,7 +9,7 @@ import torch.nn.functional as tf
 from droidw_cli.ba.params import BAParams, UncertaintyParams
 from droidw_cli.ba.synthetic import make_problem, max_pose_error, perturb
 from droidw_cli.ba.types import BAState, EdgeSet
-from droidw_cli.ba.uncertainty import uncertainty_map, weight_factor
+from droidw_cli.ba.uncertainty import RELATIVE_LEVEL, uncertainty_map, weight_factor, weighting_input
 from droidw_cli.geometry.projection import reproject
 from droidw_backend_cpu import CpuBackend
 
@@ -162,3 +162,12 @@ def test_uncertainty_finds_movers_and_protects_the_poses():
     assert float(weight_factor(u[~prob.mover_mask], "clamp").mean()) > 0.7
     print("movers:", err_weighted, err_plain, _auroc(u[4:], prob.mover_mask[4:]))
     assert 3.0 * err_weighted < err_plain, (err_weighted, err_plain)
+
+
+def test_relative_mode_rescales_to_the_window_median():
+    u = torch.tensor([[0.9, 1.0, 1.0, 1.1, 2.0]])
+    rel = weighting_input(u, "relative")
+    assert float(rel.median()) == pytest.approx(RELATIVE_LEVEL)
+    w = weight_factor(rel, "relative")
+    assert float(w[0, 1]) == 1.0 and float(w[0, 4]) < 0.1  # background untouched, the outlier cut
+    assert torch.equal(weighting_input(u, "clamp"), u)

@@ -79,7 +79,6 @@ class FrontendConfig:
 
     warmup: int = 12
     init_iters: int = 40
-    init_refit: int = 0  # droidw: θ-only steps after init, then the init BA is re-run weighted (0 = off)
     init_min_parallax: float = 3.0  # median flow (px) a keyframe needs before initialisation
     radius: int = 2
     window: int = 25

@@ -26,6 +26,7 @@ from droidw_cli.ba.uncertainty import (
     similarity_edge_mask,
     uncertainty_from_logits,
     uncertainty_logits,
+    weighting_input,
 )
 from droidw_cli.geometry.projection import reproject as torch_reproject
 from droidw_backend_cpu.linearize import DEFAULT_CHUNK_BYTES, linearize
@@ -109,7 +110,8 @@ class CpuBackend(BABackend):
         if not unc.enable or state.features is None or state.theta is None:
             return None
         logits = uncertainty_logits(state.features, state.theta, state.map_inputs)
-        return uncertainty_from_logits(logits, unc.softplus_offset).reshape(state.num_frames, -1)
+        u = uncertainty_from_logits(logits, unc.softplus_offset).reshape(state.num_frames, -1)
+        return weighting_input(u, unc.mode)
 
     def ba_step(self, state: BAState, edges: EdgeSet, params: BAParams) -> BAStepResult:
         validate_inputs(state, edges)

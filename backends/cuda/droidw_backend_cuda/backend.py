@@ -28,7 +28,8 @@ from droidw_backend_cpu.linearize import expand_to_both_poses, scatter_eblocks
 from droidw_backend_cuda import build
 
 #: codes of the kernels' enums (csrc/droidw_ba.h)
-UNCERTAINTY_CODES = {"off": 0, "clamp": 1, "inverse": 2}
+# "relative" uses the clamp mapping on u already rescaled by weighting_input (shared Python code)
+UNCERTAINTY_CODES = {"off": 0, "clamp": 1, "inverse": 2, "relative": 1}
 FOCAL_CODES = {"none": 0, "shared": 1, "xy": 2}
 
 

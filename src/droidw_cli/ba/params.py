@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-UNCERTAINTY_MODES = ("clamp", "inverse")
+UNCERTAINTY_MODES = ("clamp", "inverse", "relative")
 FOCAL_MODES = ("none", "shared", "xy")
 
 
@@ -22,6 +22,9 @@ class UncertaintyParams:
             ``"clamp"`` (official code): w ← w · clamp(1 / max(45u − 35, 0.1), 0, 1),
             so u ≤ 0.8 leaves w untouched and larger u shrinks it fast.
             ``"inverse"`` (paper Eq. 5): w ← w / u.
+            ``"relative"`` (droidw): the clamp mapping applied to u rescaled so that
+            the window's median pixel sits at 0.75, just under the knee; see
+            :func:`droidw_cli.ba.uncertainty.weighting_input`.
         bidirectional: also weight by u_j sampled at p_ij.
         gamma_data: γ_data, weight of E_sim (Eq. 7).
         gamma_prior: γ_prior, weight of E_prior = Σ log(u + 1) (Eq. 8).  0 is the

@@ -91,9 +91,28 @@ def uncertainty_map(features: Tensor, theta: Tensor, offset: float = 1.1, map_in
     return uncertainty_from_logits(uncertainty_logits(features, theta, map_inputs), offset)
 
 
+#: "relative" mode: the window's median u is mapped to this level before the clamp mapping
+RELATIVE_LEVEL = 0.75
+
+
+def weighting_input(u: Tensor, mode: str) -> Tensor:
+    """The u the BA weighting sees: u itself, or for ``"relative"`` u · 0.75 / median(u).
+
+    The clamp mapping only bites above u = 0.8, a level calibrated for DINOv2
+    features.  With other features (XFeat here) the affine map settles at a
+    different absolute level while still ranking movers above the background;
+    rescaling by the window's median (the background, as long as movers cover
+    less than half the view) puts the background just under the knee and the
+    movers on the steep part, whatever the level.
+    """
+    if mode != "relative":
+        return u
+    return u * (RELATIVE_LEVEL / u.median().clamp_min(1e-6))
+
+
 def weight_factor(u: Tensor, mode: str) -> Tensor:
     """The BA confidence multiplier of uncertainty u (see the module docstring)."""
-    if mode == "clamp":
+    if mode in ("clamp", "relative"):  # "relative" gets u already rescaled by weighting_input
         return (1.0 / (CLAMP_SLOPE * u - CLAMP_OFFSET).clamp_min(CLAMP_FLOOR)).clamp(0.0, 1.0)
     if mode == "inverse":
         return 1.0 / u

@@ -15,7 +15,7 @@ import click
 
 @click.command("demo")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("droidw-demo"), show_default=True)
-@click.option("--frames", type=int, default=120, show_default=True, help="Length of the generated sequence.")
+@click.option("--frames", type=int, default=90, show_default=True, help="Length of the generated sequence.")
 @click.option("--seed", type=int, default=1, show_default=True)
 @click.option("--backend", default="auto", show_default=True)
 @click.option("--no-baseline", is_flag=True, help="Skip the uncertainty-off comparison run.")

@@ -6,9 +6,11 @@ separates movers poorly (AUROC about 0.8 on our synthetic scenes even with
 exact geometry).  Two cheap multi-view cues, appended as extra inputs X of
 the same affine map (u = softplus(θ·[F; X] + b)), lift that to about 0.95:
 
-* ``log(1 + r̄)``: the mean over a keyframe's outgoing edges of the flow
-  residual r = ‖p*_ij − p_ij‖ (grid pixels) under the current poses and
-  depths: movers land somewhere else than the rigid scene predicts;
+* ``log(1 + r̄)``: the mean over a keyframe's outgoing edges with
+  |i − j| ≥ 2 of the flow residual r = ‖p*_ij − p_ij‖ (grid pixels) under the
+  current poses and depths: movers land somewhere else than the rigid scene
+  predicts.  Adjacent pairs are left out because a pixel's free disparity can
+  absorb a mover's motion along the epipolar line of one pair, not of several;
 * ``1 − w̄``: one minus the mean correspondence confidence (forward-backward
   and photometric agreement), low where pixels are occluded or disoccluded.
 
@@ -25,6 +27,8 @@ from droidw_cli.ba.interface import BABackend
 from droidw_cli.ba.types import BAState, EdgeSet
 
 EVIDENCE_CHANNELS = 2
+#: the residual channel uses edges at least this many keyframes apart
+WIDE_GAP = 2
 
 
 def evidence_maps(backend: BABackend, state: BAState, edges: EdgeSet, min_depth: float) -> Tensor:
@@ -32,7 +36,7 @@ def evidence_maps(backend: BABackend, state: BAState, edges: EdgeSet, min_depth:
     n = state.num_frames
     h, w = state.grid
     coords, valid = backend.reproject(state, edges.ii, edges.jj, min_depth)
-    v = valid.float()
+    v = valid.float() * ((edges.ii - edges.jj).abs() >= WIDE_GAP).float()[:, None, None]
     r = torch.linalg.vector_norm(edges.target - coords, dim=-1) * v
     count = torch.zeros(n, h, w).index_add_(0, edges.ii, v).clamp_min(1.0)
     residual = torch.log1p(torch.zeros(n, h, w).index_add_(0, edges.ii, r) / count)

@@ -22,8 +22,7 @@ from droidw_cli.config import TrackConfig
 from droidw_cli.slam import graph
 from droidw_cli.slam.evidence import EVIDENCE_CHANNELS, evidence_maps
 from droidw_cli.slam.keyframes import KeyframeBuffer
-from droidw_cli.ba.uncertainty import weight_factor
-from droidw_cli.slam.optimizer import SharedState, fit_theta, run_window, window_state
+from droidw_cli.slam.optimizer import SharedState, run_window, window_state
 from droidw_cli.slam.poses import extrapolate
 
 
@@ -118,31 +117,8 @@ class Frontend:
             pairs = graph.init_pairs(m, init_radius)
             self._match(pairs, use_prior=m >= 3)
             self._optimise(0, m, pairs, 4 if m < n else f.init_iters)
-        pairs = graph.init_pairs(n, init_radius)
-        if f.init_refit > 0:
-            self._refit(n, pairs)
-        self._optimise(0, n, pairs, f.iters1 + f.iters2)
+        self._optimise(0, n, graph.init_pairs(n, init_radius), f.iters1 + f.iters2)
         self.initialised = True
-
-    def _refit(self, n: int, pairs: list[tuple[int, int]]) -> None:
-        """Fit θ to the initial geometry, reset down-weighted depths, re-run the init BA weighted.
-
-        The incremental initialisation runs before θ has learned anything, so a
-        mover's pixels pull poses and absorb its motion into their disparities.
-        Pixels whose BA weight factor falls below 1/2 under the fitted θ get the
-        frame's median disparity of the trusted pixels back before the re-run.
-        """
-        u = fit_theta(self.backend, self.buffer, 0, n, self.cache.edge_set(pairs), self.params, self.shared,
-                      self.fcfg.init_refit)
-        if u is None:
-            return
-        doubt = weight_factor(u, self.params.uncertainty.mode) < 0.5
-        disps = self.buffer.disps[:n]
-        for t in range(n):  # per frame (≤ warmup frames), vectorised over pixels
-            trusted = disps[t][~doubt[t]]
-            if trusted.numel():
-                disps[t][doubt[t]] = trusted.median().to(disps.dtype)
-        self._optimise(0, n, pairs, self.fcfg.init_iters)
 
     def _update(self, k: int) -> None:
         f = self.fcfg

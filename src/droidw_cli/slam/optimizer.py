@@ -17,7 +17,6 @@ from torch import Tensor
 from droidw_cli.ba.interface import BABackend
 from droidw_cli.ba.params import BAParams
 from droidw_cli.ba.types import BAState, EdgeSet
-from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.slam.evidence import evidence_maps
 from droidw_cli.slam.keyframes import KeyframeBuffer
 
@@ -70,26 +69,3 @@ def run_window(backend: BABackend, buffer: KeyframeBuffer, lo: int, hi: int, edg
     if state.theta is not None and optimize_theta:
         shared.theta = state.theta.clone()
     return cost
-
-
-
-
-def fit_theta(backend: BABackend, buffer: KeyframeBuffer, lo: int, hi: int, edges: EdgeSet, params: BAParams,
-              shared: SharedState, iters: int) -> Tensor | None:
-    """``iters`` uncertainty steps on θ alone, poses and disparities held fixed.
-
-    Used after initialisation: the warm-up BA ran before θ had learned
-    anything, so θ is first fitted to the (movers included) geometry, then the
-    weighted BA is re-run.  Returns u (hi − lo, H, W) under the fitted θ, or
-    None when the uncertainty is unused.
-    """
-    unc = params.uncertainty
-    if not (unc.enable and buffer.features is not None and shared.theta is not None) or iters <= 0:
-        return None
-    state = window_state(buffer, lo, hi, shared, True)
-    if unc.evidence:
-        state = state.with_(map_inputs=evidence_maps(backend, state, edges, params.min_depth))
-    for _ in range(iters):
-        state = state.with_(theta=backend.uncertainty_step(state, edges, params).theta)
-    shared.theta = state.theta.clone()
-    return uncertainty_map(state.features, state.theta, unc.softplus_offset, state.map_inputs)
