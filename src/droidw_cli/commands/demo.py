@@ -18,9 +18,11 @@ import click
 @click.option("--frames", type=int, default=90, show_default=True, help="Length of the generated sequence.")
 @click.option("--seed", type=int, default=1, show_default=True)
 @click.option("--backend", default="auto", show_default=True)
+@click.option("--config", "config_name", default="fast", show_default=True,
+              help="Tracking config (the demo uses the smaller, faster working size by default).")
 @click.option("--no-baseline", is_flag=True, help="Skip the uncertainty-off comparison run.")
 @click.option("--quiet", is_flag=True, help="No progress bars.")
-def demo(out_dir, frames, seed, backend, no_baseline, quiet):
+def demo(out_dir, frames, seed, backend, config_name, no_baseline, quiet):
     """Generate a synthetic dynamic scene, track it, evaluate it.
 
     \b
@@ -44,7 +46,7 @@ def demo(out_dir, frames, seed, backend, no_baseline, quiet):
     rows = []
     for label, run_dir, overrides in runs:
         click.echo(f"tracking ({label}) ...")
-        result, paths = run_track(seq, run_dir, None, backend, "default", overrides, progress=progress)
+        result, paths = run_track(seq, run_dir, None, backend, config_name, overrides, progress=progress)
         ate = evaluate_ate(gt, read_trajectory(run_dir / "traj.txt"), align="sim3")
         rows.append((label, ate.rmse, result.fps, len(result.kf_index), paths))
     click.echo("")
