@@ -240,6 +240,12 @@ def format_trajectory(traj: Trajectory, fmt: str = "tum") -> str:
     raise InputError(f"unknown trajectory format {fmt!r} (use one of {', '.join(FORMATS)})")
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
 def atomic_write_text(path: str | Path, text: str) -> None:
     """Write a text file via a temporary name and an atomic rename (no partial files)."""
     atomic_write_bytes(path, text.encode("utf-8"))
@@ -258,6 +264,7 @@ def atomic_write_bytes(path: str | Path, payload: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(payload)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the usual permissions
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
