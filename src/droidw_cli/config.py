@@ -40,10 +40,8 @@ class IOConfig:
 
 @dataclass(frozen=True)
 class CalibConfig:
-    """Self-calibration for ``--calib auto``: focal search range as a multiple of max(H, W)."""
+    """Self-calibration for ``--calib auto``: the focal length BA starts from, as a multiple of max(H, W)."""
 
-    focal_min: float = 0.5
-    focal_max: float = 2.0
     focal_init: float = 0.9
 
 
@@ -84,8 +82,6 @@ class FrontendConfig:
     window: int = 25
     max_edges: int = 75
     flow_thresh: float = 16.0
-    keyframe_thresh: float = 3.0
-    beta: float = 0.75
     iters1: int = 3
     iters2: int = 2
     velocity_damping: float = 0.5
@@ -93,14 +89,10 @@ class FrontendConfig:
 
 @dataclass(frozen=True)
 class BackendConfig:
-    """Final global BA over all keyframes with proximity edges."""
+    """Final global BA over all keyframes, on every edge the frontend matched."""
 
     enable: bool = True
-    flow_thresh: float = 25.0
-    radius: int = 1
-    nms: int = 5
     iters: int = 12
-    max_edges_per_frame: int = 6
 
 
 @dataclass(frozen=True)
@@ -112,11 +104,13 @@ class FillerConfig:
 
 @dataclass(frozen=True)
 class DynamicsConfig:
-    """ADD-SLAM style scene-consistency masks."""
+    """ADD-SLAM style scene-consistency masks (:mod:`droidw_cli.dynamics`; not yet used by the tracker).
 
-    enable: bool = False
+    ``tau_scale``: the colour and depth thresholds are this many times the
+    frame's median error (ADD-SLAM: anything from 10× to 30× works).
+    """
+
     tau_scale: float = 20.0
-    every: int = 5
 
 
 @dataclass(frozen=True)

@@ -5,9 +5,9 @@ For keyframe k the sources are its neighbours k − radius … k + radius
 
     predict_views (warp.py) → inconsistency (consistency.py) → refine_mask (refine.py)
 
-and the result is the union of the grown objects.  ``DynamicsConfig.enable``
-and ``DynamicsConfig.every`` are the caller's schedule; :func:`detect_dynamic`
-always runs and uses only ``tau_scale``.
+and the result is the union of the grown objects.  :func:`detect_dynamic`
+uses ``DynamicsConfig.tau_scale``; scheduling (ADD-SLAM runs it every 5-10
+frames) is the caller's.
 """
 
 from __future__ import annotations

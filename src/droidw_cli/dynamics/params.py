@@ -1,8 +1,8 @@
 """Tuning knobs of the scene-consistency dynamic detector (beyond ``DynamicsConfig``).
 
-``DynamicsConfig`` (config.py) carries the user-facing switches (``enable``,
-``tau_scale``, ``every``); :class:`DetectionParams` holds the rest, with
-defaults chosen for the 1/8 BA grid.
+``DynamicsConfig`` (config.py) carries the user-facing ``tau_scale``;
+:class:`DetectionParams` holds the rest, with defaults chosen for the 1/8 BA
+grid.
 """
 
 from __future__ import annotations
