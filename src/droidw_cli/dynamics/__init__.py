@@ -8,6 +8,9 @@ Pipeline for one keyframe (pure functions, torch over pixels):
 * :func:`refine_mask` — region growing of the seeds, inscribed-circle centres;
 * :func:`detect_dynamic` — all of the above for every keyframe;
 * :class:`DynamicObjectTracker` — object ids across frames.
+
+:mod:`droidw_cli.dynamics.epipolar` is a cheaper cue that needs no map that the
+tracker uses: pixels off the dominant epipolar geometry of the dense flow.
 """
 
 from droidw_cli.dynamics.consistency import InconsistencyMaps, inconsistency

@@ -1,0 +1,99 @@
+"""Epipolar motion segmentation: Sampson distance, the fitted geometry, and the keyframe mask."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from droidw_cli.dynamics.epipolar import (NOISE_FACTOR, block_centres, epipolar_distance, moving_mask,
+                                          sampson_distance)
+
+H, W = 96, 128  # working resolution; the grid is 12 × 16
+K = np.array([[100.0, 0.0, 63.5], [0.0, 100.0, 47.5], [0.0, 0.0, 1.0]])
+
+
+def _skew(t):
+    return np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
+
+
+def _rigid_flow(depth: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(H, W, 2) flow of a pure translation t of the camera over a scene at ``depth`` (H, W)."""
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
+    rays = np.linalg.inv(K) @ np.stack([xs.ravel(), ys.ravel(), np.ones(xs.size)])
+    pts = rays * depth.ravel() - t[:, None]
+    proj = K @ pts
+    u, v = proj[0] / proj[2], proj[1] / proj[2]
+    return np.stack([u - xs.ravel(), v - ys.ravel()], 1).reshape(H, W, 2).astype(np.float32)
+
+
+def _scene():
+    ys, xs = np.mgrid[0:H, 0:W]
+    depth = 2.0 + 1.5 * np.sin(xs / 17.0) * np.cos(ys / 13.0) + 0.01 * xs  # varied depth: F is well determined
+    t = np.array([0.12, 0.03, 0.02])
+    flow = _rigid_flow(depth, t)
+    mover = np.zeros((H, W), bool)
+    mover[24:56, 32:64] = True  # grid cells rows 3-6, cols 4-7
+    flow[mover] += np.array([0.0, 6.0], np.float32)  # moves 6 px down, across the near-horizontal epipolar lines
+    return flow, mover, t
+
+
+def test_sampson_distance_is_zero_on_the_epipolar_line_and_the_offset_across_it():
+    e_mat = _skew(np.array([1.0, 0.0, 0.0]))  # F of a pure x-translation with K = I: epipolar lines are horizontal
+    x_i = np.array([[10.0, 5.0], [3.0, -2.0]])
+    on_line = x_i + np.array([[4.0, 0.0], [-7.0, 0.0]])
+    assert np.allclose(sampson_distance(e_mat, x_i, on_line), 0.0)
+    off = x_i + np.array([[4.0, 1.0], [0.0, -3.0]])
+    # Sampson distance of a vertical offset δ between two horizontal lines: |δ| / √2
+    assert np.allclose(sampson_distance(e_mat, x_i, off), np.array([1.0, 3.0]) / np.sqrt(2.0))
+
+
+def test_block_centres_follow_the_pixel_centre_convention():
+    c = block_centres(16, 24)
+    assert c.shape == (2 * 3, 2)
+    assert np.allclose(c[0], [3.5, 3.5]) and np.allclose(c[-1], [19.5, 11.5])
+
+
+def test_rigid_background_is_on_its_epipolar_lines_and_the_mover_is_not():
+    flow, mover, _ = _scene()
+    d = epipolar_distance(flow, np.ones((H // 8, W // 8)))
+    assert d.shape == (H // 8, W // 8)
+    cells = mover.reshape(H // 8, 8, W // 8, 8).all(axis=(1, 3))
+    assert np.median(d[~cells]) < 0.05
+    assert np.min(d[cells]) > 1.0
+
+
+def test_low_confidence_pixels_do_not_fit_the_geometry():
+    flow, mover, _ = _scene()
+    weight = np.ones((H // 8, W // 8))
+    weight[:2] = 0.0
+    assert epipolar_distance(flow, weight) is not None
+    assert epipolar_distance(flow, np.zeros((H // 8, W // 8))) is None
+
+
+def test_moving_mask_takes_any_edge_and_grows_by_the_dilation():
+    d1 = np.zeros((12, 16), np.float32)
+    d2 = np.zeros((12, 16), np.float32)
+    d1[5, 5] = 2.0
+    d2[8, 10] = 2.0
+    m = moving_mask([d1, d2], thresh=0.5, dilate=0)
+    assert m.sum() == 2 and m[5, 5] and m[8, 10]
+    grown = moving_mask([d1, d2], thresh=0.5, dilate=1)
+    assert grown.sum() == 18 and grown[4, 4] and not grown[3, 5]
+
+
+def test_moving_mask_threshold_rises_with_the_noise_level():
+    noisy = np.full((12, 16), 0.4, np.float32)
+    noisy[0, 0] = 0.4 * NOISE_FACTOR * 0.9  # above the fixed threshold, below the noise-scaled one
+    noisy[1, 1] = 0.4 * NOISE_FACTOR * 1.1
+    m = moving_mask([noisy], thresh=0.5, dilate=0)
+    assert not m[0, 0] and m[1, 1] and m.sum() == 1
+
+
+@pytest.mark.parametrize("dilate", [0, 2])
+def test_epipolar_mask_finds_the_mover_end_to_end(dilate):
+    flow, mover, _ = _scene()
+    d = epipolar_distance(flow, np.ones((H // 8, W // 8)))
+    m = moving_mask([d], thresh=0.5, dilate=dilate)
+    cells = mover.reshape(H // 8, 8, W // 8, 8).all(axis=(1, 3))
+    assert m[cells].all()
+    assert m.mean() < 0.5
