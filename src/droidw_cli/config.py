@@ -104,12 +104,21 @@ class FillerConfig:
 
 @dataclass(frozen=True)
 class DynamicsConfig:
-    """ADD-SLAM style scene-consistency masks (:mod:`droidw_cli.dynamics`; not yet used by the tracker).
+    """Explicit dynamic detection (:mod:`droidw_cli.dynamics`).
 
-    ``tau_scale``: the colour and depth thresholds are this many times the
-    frame's median error (ADD-SLAM: anything from 10× to 30× works).
+    ``epipolar``: with ``uncertainty.enable``, the pixels of a keyframe that the
+    dominant epipolar geometry of its edges cannot explain get zero
+    correspondence confidence (:mod:`droidw_cli.dynamics.epipolar`): Sampson
+    distance above ``epipolar_thresh`` working-resolution px on any edge,
+    grown by ``epipolar_dilate`` grid cells.
+    ``tau_scale``: ADD-SLAM consistency masks (not used by the tracker yet):
+    the colour and depth thresholds are this many times the frame's median
+    error (ADD-SLAM: anything from 10× to 30× works).
     """
 
+    epipolar: bool = True
+    epipolar_thresh: float = 0.5
+    epipolar_dilate: int = 2
     tau_scale: float = 20.0
 
 
