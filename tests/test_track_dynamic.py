@@ -1,8 +1,17 @@
-"""Dynamic uncertainty end to end on a short synthetic sequence with movers.
+"""Dynamic uncertainty end to end on short synthetic sequences: the acceptance rows of issue 5.
 
-The full-size acceptance figures (300 frames, 3 dynamic seeds and a static
-control) come from ``benchmarks/dynamic_bench.py``; this test keeps the same
-measures on a short clip so that a regression shows up in ``make test``.
+The full-size figures (300 frames, 3 dynamic seeds and a static control)
+come from ``benchmarks/dynamic_bench.py``; these tests hold the same
+thresholds on an 80-frame 320×240 clip with movers and on a static control,
+so that a regression shows up in ``make test``:
+
+* ATE with the uncertainty at least 2× lower than with ``uncertainty.enable=false``;
+* on the static control, no more than 10 % worse;
+* uncertainty AUROC against the ground-truth masks over all keyframes ≥ 0.9;
+* under 1 % of the static cloud's points on ground-truth dynamic pixels.
+
+Measured when written: dynamic ATE 6.30 cm on vs 18.94 cm off, AUROC 0.920,
+0.07 % dynamic points; static 0.55 cm on vs 1.03 cm off.
 """
 
 from __future__ import annotations
@@ -41,12 +50,28 @@ def dynamic_runs(tmp_path_factory):
     return seq, on, off
 
 
-def test_uncertainty_beats_the_unweighted_baseline(dynamic_runs):
+@pytest.fixture(scope="module")
+def static_runs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("static")
+    cfg = SynthConfig.preset("static", width=320, height=240, frames=80, seed=1, camera_speed=1.5)
+    seq = write_sequence(cfg, root / "seq", progress=False)
+    return seq, _run(seq, root / "on"), _run(seq, root / "off", "uncertainty.enable=false")
+
+
+def _ate(seq, run) -> float:
+    return evaluate_ate(read_trajectory(seq / "groundtruth.txt"), read_trajectory(run / "traj.txt")).rmse
+
+
+def test_uncertainty_halves_the_error_with_movers(dynamic_runs):
     seq, on, off = dynamic_runs
-    gt = read_trajectory(seq / "groundtruth.txt")
-    ate_on = evaluate_ate(gt, read_trajectory(on / "traj.txt")).rmse
-    ate_off = evaluate_ate(gt, read_trajectory(off / "traj.txt")).rmse
-    assert ate_on < ate_off, f"uncertainty on {ate_on * 100:.2f} cm vs off {ate_off * 100:.2f} cm"
+    ate_on, ate_off = _ate(seq, on), _ate(seq, off)
+    assert 2.0 * ate_on < ate_off, f"uncertainty on {ate_on * 100:.2f} cm vs off {ate_off * 100:.2f} cm"
+
+
+def test_uncertainty_costs_nothing_on_a_static_scene(static_runs):
+    seq, on, off = static_runs
+    ate_on, ate_off = _ate(seq, on), _ate(seq, off)
+    assert ate_on <= 1.1 * ate_off, f"uncertainty on {ate_on * 100:.2f} cm vs off {ate_off * 100:.2f} cm"
 
 
 def test_uncertainty_ranks_movers_above_the_background(dynamic_runs):
@@ -55,19 +80,18 @@ def test_uncertainty_ranks_movers_above_the_background(dynamic_runs):
         unc, index = z["uncertainty"], z["index"]
     masks = masks_on_grid([seq / "mask" / f"{name}" for name in _mask_names(seq, index)], (240, 320), AREA)
     score = auroc(unc, masks)
-    assert score > 0.75, f"AUROC {score:.3f}"
+    assert score >= 0.9, f"AUROC {score:.3f}"
 
 
-def test_static_cloud_is_mostly_static(dynamic_runs):
+def test_static_cloud_is_static(dynamic_runs):
     seq, on, _ = dynamic_runs
     with np.load(on / "keyframes.npz") as z:
         npz = {k: z[k] for k in z.files}
     masks = masks_on_grid([seq / "mask" / n for n in _mask_names(seq, npz["index"])], (240, 320), AREA)
     cloud = build_cloud(npz, CloudParams())
     dynamic_share = (cloud.static & masks.reshape(-1)).sum() / max(1, cloud.static.sum())
-    everything_share = masks.mean()
     assert cloud.static.sum() > 1000
-    assert dynamic_share < 0.5 * everything_share, (dynamic_share, everything_share)
+    assert dynamic_share < 0.01, f"{100 * dynamic_share:.2f} % of the static cloud is on movers"
 
 
 def _mask_names(seq, index):
