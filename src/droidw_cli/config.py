@@ -110,7 +110,9 @@ class DynamicsConfig:
     dominant epipolar geometry of its edges cannot explain get zero
     correspondence confidence (:mod:`droidw_cli.dynamics.epipolar`): Sampson
     distance above ``epipolar_thresh`` working-resolution px on any edge,
-    grown by ``epipolar_dilate`` grid cells.
+    grown by ``epipolar_dilate`` grid cells.  Off while the focal length is
+    estimated (``--calib auto``): on a real clip the masks took the focal
+    length from 617 px to 17 px.
     ``tau_scale``: ADD-SLAM consistency masks (not used by the tracker yet):
     the colour and depth thresholds are this many times the frame's median
     error (ADD-SLAM: anything from 10× to 30× works).

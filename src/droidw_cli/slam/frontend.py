@@ -52,8 +52,12 @@ class Frontend:
         self.shared = SharedState(intrinsics8.clone().float(), theta)
         self.images: dict[int, np.ndarray] = {}
         self.initialised = False
-        # epipolar motion segmentation: (Sampson distance map, raw confidence) of the window's edges
-        self._segmenting = cfg.dynamics.epipolar and params.uncertainty.enable and feature_channels > 0
+        # epipolar motion segmentation: (Sampson distance map, raw confidence) of the window's edges.
+        # Not while the focal length is estimated: the masks also take the high-parallax periphery,
+        # where real lenses bend the epipolar lines, and that is what pins the focal length
+        # (lady-running with --calib auto: fx 617 px without the masks, 17 px with them).
+        self._segmenting = (cfg.dynamics.epipolar and params.uncertainty.enable and feature_channels > 0
+                            and params.optimize_focal == "none")
         self._epipolar: dict[tuple[int, int], tuple[np.ndarray, torch.Tensor]] = {}
         h, w = grid
         ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32), indexing="ij")
