@@ -105,15 +105,21 @@ def warn_corrupt(message: str) -> None:
     warnings.warn(message, CorruptFrameWarning, stacklevel=3)
 
 
-def decode_rgb(path: Path) -> np.ndarray | None:
-    """Read an image file as H×W×3 uint8 RGB (grey and 16-bit images are converted); None if undecodable."""
-    import cv2
-
+def _file_bytes(path: Path) -> np.ndarray | None:
+    """The file's bytes as a uint8 array (for cv2.imdecode, which handles any path encoding); None if unreadable or empty."""
     try:
         data = np.fromfile(str(path), dtype=np.uint8)
     except OSError:
         return None
-    if data.size == 0:
+    return data if data.size else None
+
+
+def decode_rgb(path: Path) -> np.ndarray | None:
+    """Read an image file as H×W×3 uint8 RGB (grey and 16-bit images are converted); None if undecodable."""
+    import cv2
+
+    data = _file_bytes(path)
+    if data is None:
         return None
     bgr = cv2.imdecode(data, cv2.IMREAD_COLOR)
     if bgr is None or bgr.ndim != 3 or bgr.shape[2] != 3:
@@ -125,11 +131,8 @@ def decode_depth(path: Path, scale: float) -> np.ndarray | None:
     """Read a uint16 depth PNG as float32 metres (value / scale; 0 stays 0 = invalid); None if undecodable."""
     import cv2
 
-    try:
-        data = np.fromfile(str(path), dtype=np.uint8)
-    except OSError:
-        return None
-    if data.size == 0:
+    data = _file_bytes(path)
+    if data is None:
         return None
     raw = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     if raw is None or raw.ndim != 2:

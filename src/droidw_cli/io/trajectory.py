@@ -109,8 +109,12 @@ def tq_from_pose(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return poses[:, :3, 3].copy(), matrix_to_quat_xyzw(poses[:, :3, :3])
 
 
-def _numeric_rows(path: Path, ncols: tuple[int, ...], delimiter: str | None = None) -> list[tuple[int, list[float]]]:
-    """Parse the numeric lines of a text file, reporting the first bad one by number."""
+def _numeric_rows(path: Path, ncols: tuple[int, ...], delimiter: str | None = None,
+                  extra_ok: bool = False) -> list[tuple[int, list[float]]]:
+    """Parse the numeric lines of a text file, reporting the first bad one by number.
+
+    With ``extra_ok`` a line needs at least ``ncols[0]`` numbers and is cut to that many.
+    """
     if not path.is_file():
         raise InputError(f"trajectory file not found: {path}")
     rows = []
@@ -124,7 +128,11 @@ def _numeric_rows(path: Path, ncols: tuple[int, ...], delimiter: str | None = No
                 values = [float(p) for p in parts]
             except ValueError:
                 raise InputError(f"{path}:{lineno}: not a number in line {s[:60]!r}") from None
-            if len(values) not in ncols:
+            if extra_ok and len(values) >= ncols[0]:
+                values = values[:ncols[0]]
+            elif extra_ok:
+                raise InputError(f"{path}:{lineno}: expected at least {ncols[0]} numbers, found {len(values)}")
+            elif len(values) not in ncols:
                 want = " or ".join(str(n) for n in ncols)
                 raise InputError(f"{path}:{lineno}: expected {want} numbers, found {len(values)}")
             if not np.all(np.isfinite(values)):
@@ -169,25 +177,7 @@ def read_kitti(path: str | Path, times: str | Path | None = None) -> Trajectory:
 
 def read_euroc(path: str | Path) -> Trajectory:
     """Read an EuRoC CSV: ns timestamp, position, quaternion **w-x-y-z**, extra columns ignored."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"trajectory file not found: {path}")
-    rows = []
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        for lineno, line in enumerate(fh, 1):
-            s = line.strip()
-            if not s or s.startswith("#"):
-                continue
-            parts = s.split(",")
-            try:
-                values = [float(p) for p in parts]
-            except ValueError:
-                raise InputError(f"{path}:{lineno}: not a number in line {s[:60]!r}") from None
-            if len(values) < 8:
-                raise InputError(f"{path}:{lineno}: expected at least 8 comma-separated numbers, found {len(values)}")
-            rows.append((lineno, values[:8]))
-    if not rows:
-        raise InputError(f"{path}: no poses found")
+    rows = _numeric_rows(Path(path), (8,), delimiter=",", extra_ok=True)
     a = np.array([v for _, v in rows])
     q_xyzw = a[:, [5, 6, 7, 4]]  # EuRoC stores w first
     _check_quats(path, rows, q_xyzw)
