@@ -10,16 +10,9 @@ from droidw_cli.ba.synthetic import make_problem, max_pose_error, perturb
 from droidw_cli.geometry.lie import pose_inverse
 from droidw_backend_cpu import CpuBackend
 
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
 PLAIN = UncertaintyParams(enable=False)
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """One intra-op thread: on a shared 2-core machine torch's thread pool can stall badly."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 @pytest.fixture(scope="module")

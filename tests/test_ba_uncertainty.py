@@ -13,14 +13,7 @@ from droidw_cli.ba.uncertainty import RELATIVE_LEVEL, uncertainty_map, weight_fa
 from droidw_cli.geometry.projection import reproject
 from droidw_backend_cpu import CpuBackend
 
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """One intra-op thread: on a shared 2-core machine torch's thread pool can stall badly."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def _autograd_loss(state: BAState, edges: EdgeSet, theta: torch.Tensor, unc: UncertaintyParams) -> torch.Tensor:

@@ -2,27 +2,14 @@
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 import pytest
 
 from droidw_cli.correspondence import DISCorrespondence, grid_coordinates
 
+from video_frames import read_frames
+
 pytestmark = pytest.mark.shared
-
-
-def read_frames(path, indices, size=(384, 288)):
-    """RGB uint8 frames ``indices`` of a video, area-resized to ``size`` (w, h)."""
-    cap = cv2.VideoCapture(str(path))
-    frames, k = {}, 0
-    while k <= max(indices):
-        ok, frame = cap.read()
-        assert ok, f"cannot read frame {k} of {path}"
-        if k in indices:
-            frames[k] = cv2.cvtColor(cv2.resize(frame, size, interpolation=cv2.INTER_AREA), cv2.COLOR_BGR2RGB)
-        k += 1
-    cap.release()
-    return [frames[i] for i in indices]
 
 
 def test_fixed_camera_gives_zero_flow_with_high_confidence_on_the_background(shared_data):
