@@ -17,10 +17,6 @@ from droidw_cli.ba.params import BAParams
 from droidw_cli.ba.types import BAState, BAStepResult, EdgeSet, UncertaintyStepResult
 
 
-class BackendUnavailable(RuntimeError):
-    """The backend cannot run on this machine (the message says why)."""
-
-
 class BABackend(ABC):
     """Operations on :class:`BAState` / :class:`EdgeSet` (DROID-W Eq. 1-9)."""
 

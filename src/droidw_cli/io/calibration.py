@@ -67,10 +67,6 @@ class Calibration:
         """The 3×3 matrix K."""
         return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
 
-    def distortion_array(self) -> np.ndarray:
-        """Distortion coefficients for OpenCV (zeros(4) when there are none)."""
-        return np.array(self.distortion if self.distortion else (0.0,) * 4, dtype=np.float64)
-
     def scaled(self, src_hw: tuple[int, int], resized_hw: tuple[int, int], crop_hw: tuple[int, int] | None = None) -> "Calibration":
         """This calibration after resizing ``src_hw`` → ``resized_hw`` and centre-cropping to ``crop_hw``.
 

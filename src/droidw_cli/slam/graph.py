@@ -43,11 +43,6 @@ class EdgeCache:
         weight = torch.stack([self.targets[p][1] for p in pairs]).float()
         return EdgeSet(ii, jj, target, weight)
 
-    def drop_frame(self, k: int) -> None:
-        """Forget every edge touching keyframe k."""
-        for key in [key for key in self.targets if k in key]:
-            del self.targets[key]
-
 
 def radius_pairs(k: int, lo: int, radius: int) -> list[tuple[int, int]]:
     """Pairs between the new keyframe k and its ``radius`` predecessors (≥ lo), both directions."""

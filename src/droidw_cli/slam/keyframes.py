@@ -65,20 +65,3 @@ class KeyframeBuffer:
         self.thumbnails.append(thumbnail)
         self.count += 1
         return k
-
-    def remove_last(self) -> None:
-        """Drop the newest keyframe."""
-        if self.count == 0:
-            return
-        self.count -= 1
-        self.frame_index.pop()
-        self.timestamps.pop()
-        self.thumbnails.pop()
-        self.poses[self.count] = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
-        self.disps[self.count] = 1.0
-        self.depth_prior[self.count] = 0.0
-
-    def memory_bytes(self) -> int:
-        """Bytes held by the keyframe state (for run.json)."""
-        tensors = [self.poses, self.disps, self.depth_prior] + ([self.features] if self.features is not None else [])
-        return sum(t.numel() * t.element_size() for t in tensors) + sum(t.nbytes for t in self.thumbnails)

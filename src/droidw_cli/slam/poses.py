@@ -35,11 +35,6 @@ def to_matrix(poses: Tensor) -> np.ndarray:
     return pp.SE3(poses.double()).matrix().numpy()
 
 
-def from_matrix(mats: np.ndarray) -> Tensor:
-    """(N, 4, 4) rigid transforms → (N, 7) float32 poses."""
-    return pp.mat2SE3(torch.as_tensor(mats, dtype=torch.float64), check=False).tensor().float()
-
-
 def extrapolate(prev: Tensor, last: Tensor, damping: float) -> Tensor:
     """Damped constant velocity: G_new = Exp(damping · Log(G_last G_prev⁻¹)) G_last."""
     rel = (pp.SE3(last) @ pp.SE3(prev).Inv()).Log()

@@ -114,11 +114,6 @@ class SynthConfig:
         """Texel density in texels per metre."""
         return float(self.texel_density) if self.texel_density is not None else float(self.intrinsics[0]) / 2.0
 
-    @property
-    def duration(self) -> float:
-        """Seconds covered by the sequence (first to last frame)."""
-        return (self.frames - 1) / self.fps
-
     def timestamp(self, k: int) -> float:
         """Timestamp of frame ``k`` in seconds, rounded to microseconds as written in the files."""
         return round(self.t0 + k / self.fps, 6)
@@ -134,10 +129,6 @@ class SynthConfig:
         if name not in PRESETS:
             raise ValueError(f"unknown synth preset {name!r} (use one of {', '.join(sorted(PRESETS))})")
         return cls(**{**PRESETS[name], **overrides})
-
-    @staticmethod
-    def preset_names() -> list[str]:
-        return sorted(PRESETS)
 
     def replace(self, **changes) -> "SynthConfig":
         return dataclasses.replace(self, **changes)

@@ -157,11 +157,6 @@ class EllipseWalk:
         z = self.bob * np.abs(np.sin(0.5 * self.step_omega * t + self.s0))
         return rot_z(heading - np.pi / 2), np.concatenate([xy, z[..., None]], -1)
 
-    def at_parameter(self, s: float) -> np.ndarray:
-        e1 = np.asarray(self.e1)
-        e2 = np.array([-e1[1], e1[0]])
-        return np.asarray(self.centre) + self.a * np.cos(s) * e1 + self.b * np.sin(s) * e2
-
 
 def make_walk(centre, e1, a: float, b: float, speed: float, direction: int, s_at: float, t_at: float) -> EllipseWalk:
     """An ellipse walk at mean speed ``speed`` (m/s) that is at parameter ``s_at`` at time ``t_at``.

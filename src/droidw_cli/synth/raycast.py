@@ -153,11 +153,6 @@ def shade(atlas: np.ndarray, hits: Hits) -> np.ndarray:
     return cv2.remap(atlas, hits.map_x, hits.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
-def box_corners(box: Box) -> np.ndarray:
-    """The 8 world-frame corners of a box, (8, 3)."""
-    return box.centre + (_SIGNS * box.half) @ box.rotation.T
-
-
 def box_hits(centres: np.ndarray, rotations: np.ndarray, half: np.ndarray, poses_c2w: np.ndarray,
              intrinsics, width: int, height: int) -> np.ndarray:
     """Which pixels' rays hit one moving box in front of the camera, per pose: (N, height·width) bool.

@@ -280,13 +280,3 @@ class Scene:
             raise ValueError(f"frame index {k} out of range [0, {self.cfg.frames})")
         rgb, depth, mask = self.render(k)
         return SynthFrame(self.cfg.timestamp(k), rgb, depth, mask, self.pose(k), int(k))
-
-    def walker_poses(self, k: int) -> list[np.ndarray]:
-        """Body-to-world 4×4 poses of the walkers at frame k (body origin on the floor)."""
-        out = []
-        for w in self.walkers:
-            rot, pos = w.walk.state(float(self.walker_time(k)))
-            m = np.eye(4)
-            m[:3, :3], m[:3, 3] = rot, pos
-            out.append(m)
-        return out
