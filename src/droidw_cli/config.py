@@ -45,12 +45,22 @@ class CalibConfig:
     focal_init: float = 0.9
 
 
+#: Every flow threshold below is in pixels of the 1/8-resolution BA grid (DROID's unit): 3.0 grid px
+#: is 24 px at a 384×512 working size, and the same value means the same motion at every working size.
+GRID_UNIT = "px of the 1/8 grid"
+
+
 @dataclass(frozen=True)
 class MotionFilterConfig:
-    """A frame is a keyframe candidate when mean flow to the last keyframe ≥ thresh px."""
+    """A frame is a keyframe candidate when the mean flow to the last keyframe ≥ ``thresh`` grid px.
 
-    thresh: float = 3.0
-    max_gap: int = 9  # force a keyframe every max_gap frames
+    Before initialisation the *median* flow is tested and no keyframe is forced,
+    so a fixed camera watching movers (a minority of the pixels) never builds a
+    map out of people walking by.
+    """
+
+    thresh: float = 3.0  # grid px
+    max_gap: int = 9  # force a keyframe every max_gap frames (after initialisation)
 
 
 @dataclass(frozen=True)
@@ -73,15 +83,35 @@ class FeaturesConfig:
 
 @dataclass(frozen=True)
 class FrontendConfig:
-    """Sliding-window local BA (DROID-SLAM defaults)."""
+    """Initialisation and the sliding-window local BA (DROID-SLAM defaults; flows in grid px).
+
+    Initialisation starts as soon as ``warmup_min`` keyframes show ``init_parallax``
+    grid px of parallax (the residual of keyframe 0 → newest flow after the best
+    homography, which absorbs any rotation), or at ``warmup`` keyframes whatever
+    the parallax (DROID's fixed count).  ``keyframe_thresh``: after the first
+    ``iters1`` iterations, the second-newest keyframe is removed when its frame
+    distance to the one before is below this (the camera slowed down or
+    stopped), unless that would leave more than ``removal_max_span`` frames
+    between keyframes (the filler's motion-only BA loses accuracy over long
+    gaps of slow but steady motion).  ``flow_thresh`` and ``nms``: proximity edges of the newest
+    keyframes; ``proximity_max`` bounds how many new pairs one keyframe brings.
+    ``max_age``: an edge leaves the window BA after this many BA iterations.
+    """
 
     warmup: int = 12
+    warmup_min: int = 3
+    init_parallax: float = 0.3  # grid px
     init_iters: int = 40
-    init_min_parallax: float = 3.0  # median flow (px) a keyframe needs before initialisation
     radius: int = 2
     window: int = 25
     max_edges: int = 75
-    flow_thresh: float = 16.0
+    flow_thresh: float = 16.0  # grid px
+    keyframe_thresh: float = 3.0  # grid px
+    removal_max_span: int = 18  # frames: no removal that would leave a longer gap between keyframes
+    nms: int = 1
+    proximity_max: int = 3
+    max_age: int = 50
+    beta: float = 0.75  # frame distance: beta · full motion + (1 − beta) · translation only
     iters1: int = 3
     iters2: int = 2
     velocity_damping: float = 0.5
@@ -89,17 +119,29 @@ class FrontendConfig:
 
 @dataclass(frozen=True)
 class BackendConfig:
-    """Final global BA over all keyframes, on every edge the frontend matched."""
+    """Final global BA over all keyframes: every edge the frontend matched, plus proximity edges
+    over the whole keyframe graph (frame distance below ``flow_thresh`` grid px, |i − j| > ``radius``,
+    non-maximum suppression over ``nms`` keyframes), at most ``max_new_edges`` new pairs."""
 
     enable: bool = True
     iters: int = 12
+    flow_thresh: float = 25.0  # grid px
+    radius: int = 1
+    nms: int = 5
+    max_new_edges: int = 64
 
 
 @dataclass(frozen=True)
 class FillerConfig:
-    """Poses for non-keyframes: SE(3) interpolation then motion-only BA."""
+    """Poses for non-keyframes: SE(3) interpolation then motion-only BA against the two keyframes.
+
+    ``preset``: the DIS preset of the filler's flow (it is started from the
+    induced flow, so a cheaper preset than the frontend's suffices).
+    """
 
     iters: int = 3
+    preset: str = "medium"
+    uncertainty: bool = True  # weight the keyframes' pixels by their uncertainty
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
+from droidw_cli.correspondence.confidence import invert_flow
 from droidw_cli.correspondence.grid import validate_image
 
 
@@ -56,6 +57,17 @@ class CorrespondenceSource(ABC):
             init_flow: optional (H, W, 2) float32 full-resolution flow i → j to
                 start from (e.g. induced by the current poses and depths).
         """
+
+    def match_pair(self, image_i: np.ndarray, image_j: np.ndarray,
+                   init_flow: np.ndarray | None = None) -> tuple[Correspondence, Correspondence]:
+        """Both directions (i → j, j → i) of an edge pair.
+
+        The default runs :meth:`match` twice; sources whose confidence already
+        needs the backward flow (DIS's forward-backward check) override it to
+        reuse one forward-backward pair for both.  ``init_flow`` is i → j.
+        """
+        back = None if init_flow is None else invert_flow(np.asarray(init_flow, dtype=np.float32))
+        return self.match(image_i, image_j, init_flow), self.match(image_j, image_i, back)
 
     def mean_flow(self, image_i: np.ndarray, image_j: np.ndarray) -> float:
         """A cheap estimate of the mean flow magnitude i → j in full-res px (for the motion filter).

@@ -68,20 +68,38 @@ class DISCorrespondence(CorrespondenceSource):
         start = None if init_flow is None else np.ascontiguousarray(init_flow, dtype=np.float32).copy()
         return np.ascontiguousarray(self._dis.calc(gray_i, gray_j, start), dtype=np.float32)
 
-    def match(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None = None) -> Correspondence:
+    def _check(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None) -> np.ndarray | None:
         validate_image(image_i, "image_i")
         validate_image(image_j, "image_j")
         if image_i.shape != image_j.shape:
             raise ValueError(f"image_i and image_j differ in shape: {image_i.shape} vs {image_j.shape}")
-        init = None if init_flow is None else validate_flow(init_flow, image_i.shape[:2])
-        gray_i, gray_j = to_gray(image_i), to_gray(image_j)
+        return None if init_flow is None else validate_flow(init_flow, image_i.shape[:2])
+
+    def _flows(self, gray_i: np.ndarray, gray_j: np.ndarray, init: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         fwd = self.flow(gray_i, gray_j, init)
         bwd = self.flow(gray_j, gray_i, None if init is None else invert_flow(init))
+        return fwd, bwd
+
+    def _scored(self, gray_i: np.ndarray, gray_j: np.ndarray, fwd: np.ndarray, bwd: np.ndarray) -> Correspondence:
         conf = flow_confidence(gray_i, gray_j, fwd, bwd, self.cfg.fb_thresh, self.cfg.photo_sigma)
         w = np.clip(area_downsample(conf), 0.0, 1.0)
         target = torch.from_numpy(flow_to_target(fwd))
         weight = torch.from_numpy(np.repeat(w[..., None], 2, axis=-1))
         return Correspondence(flow=fwd, target=target, weight=weight)
+
+    def match(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None = None) -> Correspondence:
+        init = self._check(image_i, image_j, init_flow)
+        gray_i, gray_j = to_gray(image_i), to_gray(image_j)
+        fwd, bwd = self._flows(gray_i, gray_j, init)
+        return self._scored(gray_i, gray_j, fwd, bwd)
+
+    def match_pair(self, image_i: np.ndarray, image_j: np.ndarray,
+                   init_flow: np.ndarray | None = None) -> tuple[Correspondence, Correspondence]:
+        """i → j and j → i from one forward-backward DIS pair (half the flow of two ``match`` calls)."""
+        init = self._check(image_i, image_j, init_flow)
+        gray_i, gray_j = to_gray(image_i), to_gray(image_j)
+        fwd, bwd = self._flows(gray_i, gray_j, init)
+        return self._scored(gray_i, gray_j, fwd, bwd), self._scored(gray_j, gray_i, bwd, fwd)
 
     def mean_flow(self, image_i: np.ndarray, image_j: np.ndarray) -> float:
         """Mean flow magnitude (full-res px) from FAST DIS on half-size grayscale images (cheap; for the motion filter)."""

@@ -6,7 +6,14 @@ For the frames between keyframes a and b (timestamps t_a ≤ t ≤ t_b):
    α = (t − t_a)/(t_b − t_a);
 2. a few motion-only BA iterations against both keyframes: edges a → t and
    b → t, targets from the correspondence source, the keyframes' poses and
-   disparities (and uncertainty) fixed.
+   disparities fixed.  The keyframes' uncertainty enters as their BA
+   confidence multiplier (DROID-W's clamp mapping), computed once over all
+   keyframes and folded into the edge weights: rescaling u inside the filler's
+   own small problem, whose other frames have no features, would normalise
+   it against the wrong median.  The flow of each edge starts from
+   the flow that the interpolated pose and the keyframe's disparity induce,
+   so that frames far from both keyframes (keyframe removal leaves long gaps
+   where the camera slows down) are still matched.
 
 All frames of one gap are solved together in one batched BA.  Frames after
 the last keyframe are extrapolated from it and refined against it alone.
@@ -27,10 +34,12 @@ from droidw_cli.slam.poses import interpolate
 class TrajectoryFiller:
     """Collects frames between keyframes and solves their poses gap by gap."""
 
-    def __init__(self, frontend: Frontend, iters: int, evidence: torch.Tensor | None = None):
+    def __init__(self, frontend: Frontend, iters: int, weight_factors: torch.Tensor | None = None,
+                 correspondence=None):
         self.fe = frontend
         self.iters = iters
-        self.evidence = evidence  # (K, M, h, w) keyframe evidence channels, when the map uses them
+        self.weight_factors = weight_factors  # (K, h, w) uncertainty confidence multiplier per keyframe
+        self.correspondence = correspondence if correspondence is not None else frontend.correspondence
         self.poses: dict[int, torch.Tensor] = {}  # frame position → world-to-camera (7,)
         self._kf_pos = {fi: k for k, fi in enumerate(frontend.buffer.frame_index)}
         self._pending: list[tuple[int, float, np.ndarray]] = []
@@ -80,31 +89,27 @@ class TrajectoryFiller:
         fe, buf = self.fe, self.fe.buffer
         na, m = len(anchors), len(frames)
         kf = [k for k, _ in anchors]
-        ii, jj, targets, weights = [], [], [], []
-        for ai, (k, kimg) in enumerate(anchors):
-            for fj, (_, _, img) in enumerate(frames):
-                c = fe.correspondence.match(kimg, img, init_flow=None)
-                ii.append(ai)
-                jj.append(na + fj)
-                targets.append(c.target)
-                weights.append(c.weight)
-        edges = EdgeSet(torch.tensor(ii), torch.tensor(jj), torch.stack(targets).float(), torch.stack(weights).float())
         h, w = buf.grid
         disps = torch.cat([buf.disps[kf], torch.ones(m, h, w)])
-        feats = theta = extra = None
-        unc = fe.params.uncertainty
-        if unc.enable and buf.features is not None and fe.shared.theta is not None:
-            c = buf.features.shape[1]
-            feats = torch.cat([buf.features[kf].float(), torch.zeros(m, c, h, w)])
-            theta = fe.shared.theta
-            if self.evidence is not None:
-                extra = torch.cat([self.evidence[kf], torch.zeros(m, self.evidence.shape[1], h, w)])
-            elif unc.evidence:  # θ expects evidence inputs but none could be computed: neutral zeros
-                extra = torch.zeros(len(kf) + m, theta.shape[0] - c - 1, h, w)
-        state = BAState(torch.cat([buf.poses[kf], init]), disps, fe.shared.intrinsics.clone(), feats, theta,
-                        map_inputs=extra)
+        ii = torch.arange(na).repeat_interleave(m)
+        jj = na + torch.arange(m).repeat(na)
+        guess = BAState(torch.cat([buf.poses[kf], init]), disps, fe.shared.intrinsics.clone())
+        coords, valid = fe.backend.reproject(guess, ii, jj, fe.params.min_depth)
+        induced = coords.cpu() - fe.grid_coords
+        targets, weights = [], []
+        for e, (a, f) in enumerate(zip(ii.tolist(), jj.tolist())):
+            kimg, img = anchors[a][1], frames[f - na][2]
+            start = fe.full_res_flow(induced[e], valid[e].cpu(), img.shape[:2])
+            c = self.correspondence.match(kimg, img, init_flow=start)
+            targets.append(c.target)
+            weight = c.weight
+            if self.weight_factors is not None:
+                weight = weight * self.weight_factors[kf[a]][..., None]
+            weights.append(weight)
+        edges = EdgeSet(ii, jj, torch.stack(targets).float(), torch.stack(weights).float())
+        state = BAState(torch.cat([buf.poses[kf], init]), disps, fe.shared.intrinsics.clone())
         params = dataclasses.replace(fe.params, t0=na, motion_only=True, optimize_focal="none",
-                                     uncertainty=dataclasses.replace(unc, bidirectional=False))
+                                     uncertainty=dataclasses.replace(fe.params.uncertainty, enable=False))
         for _ in range(self.iters):
             state = fe.backend.ba_step(state, edges, params).state
         return state.poses[na:]

@@ -1,21 +1,30 @@
 """The frontend: initialisation and sliding-window local BA (DROID-SLAM skeleton).
 
-* Initialisation on the first ``warmup`` keyframes: they are brought in one at
-  a time (constant-velocity pose guess, constant disparity) with a few BA
-  iterations each, then ``init_iters`` iterations over all of them.
-* Update for each later keyframe k: edges to its ``radius`` predecessors plus
-  proximity edges inside the window whose induced flow is under
-  ``flow_thresh``; at most ``max_edges`` edges; ``iters1 + iters2``
-  iterations over the window [k − window + 1, k].  The oldest two keyframes
-  of a window that does not start at 0 stay fixed (gauge and scale).
+Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distance`).
+
+* Initialisation once ``warmup_min`` keyframes show ``init_parallax`` grid px of
+  parallax that no homography explains (:mod:`droidw_cli.slam.parallax`), or
+  at ``warmup`` keyframes whatever the parallax.  The keyframes are brought
+  in one at a time (constant-velocity pose guess) with a few BA iterations
+  each, then ``init_iters`` iterations over all of them.  A fixed camera never
+  gets a second keyframe (the motion filter tests the median flow before
+  initialisation), so it stays at the identity.
+* Update for each later keyframe k, which starts at the damped
+  constant-velocity pose and its predecessor's disparity warped into it:
+  edges to its ``radius`` predecessors plus proximity edges of the newest
+  keyframes inside the window (frame distance under ``flow_thresh``, with
+  non-maximum suppression ``nms``); edges older than ``max_age`` BA
+  iterations leave the window; at most ``max_edges``.  ``iters1``
+  iterations, then *keyframe removal*: when the two keyframes before k are
+  less than ``keyframe_thresh`` apart, the second-newest is removed with its
+  edges and the second round of ``iters2`` iterations is skipped, so a camera
+  that slows down or stops adds no keyframes.  The oldest two keyframes of a
+  window that does not start at 0 stay fixed (gauge and scale).
 * With the uncertainty on (and ``dynamics.epipolar``), every edge loses the
   pixels of its keyframe that the dominant epipolar geometry cannot explain
   (:mod:`droidw_cli.dynamics.epipolar`).  The learned uncertainty reads the
   map, so it cannot find movers that the map was built on: during
-  initialisation, or when a mover walks in.  Ground-truth masks during
-  initialisation only, with the uncertainty afterwards, took one synthetic
-  sequence from 23 cm to 0.8 cm ATE; the epipolar masks are the same idea
-  without ground truth.
+  initialisation, or when a mover walks in.
 """
 
 from __future__ import annotations
@@ -29,10 +38,15 @@ from droidw_cli.ba.params import BAParams
 from droidw_cli.config import TrackConfig
 from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask
 from droidw_cli.slam import graph
+from droidw_cli.slam.distance import frame_distance, transfer_disparity
 from droidw_cli.slam.evidence import EVIDENCE_CHANNELS, evidence_maps
 from droidw_cli.slam.keyframes import KeyframeBuffer
 from droidw_cli.slam.optimizer import SharedState, run_window, window_state
+from droidw_cli.slam.parallax import homography_parallax
 from droidw_cli.slam.poses import extrapolate
+
+#: proximity edges are sought for the keyframes this close to the newest (DROID: t1 − 5)
+PROXIMITY_RECENT = 5
 
 
 class Frontend:
@@ -61,7 +75,7 @@ class Frontend:
         self._epipolar: dict[tuple[int, int], tuple[np.ndarray, torch.Tensor]] = {}
         h, w = grid
         ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32), indexing="ij")
-        self._grid = torch.stack([xs, ys], -1)
+        self.grid_coords = torch.stack([xs, ys], -1)
 
     # ------------------------------------------------------------------ helpers
     def _induced_flow(self, pairs: list[tuple[int, int]]) -> tuple[torch.Tensor, torch.Tensor]:
@@ -72,9 +86,10 @@ class Frontend:
         hi = int(max(ii.max(), jj.max())) + 1
         state = window_state(self.buffer, lo, hi, self.shared, with_features=False)
         coords, valid = self.backend.reproject(state, ii - lo, jj - lo, self.params.min_depth)
-        return coords - self._grid, valid
+        return coords - self.grid_coords, valid
 
-    def _full_res_flow(self, flow_grid: torch.Tensor, valid: torch.Tensor, size: tuple[int, int]) -> np.ndarray:
+    @staticmethod
+    def full_res_flow(flow_grid: torch.Tensor, valid: torch.Tensor, size: tuple[int, int]) -> np.ndarray:
         f = torch.where(valid[..., None], flow_grid, torch.zeros_like(flow_grid)).numpy() * 8.0
         return cv2.resize(np.ascontiguousarray(f), (size[1], size[0]), interpolation=cv2.INTER_LINEAR)
 
@@ -90,16 +105,28 @@ class Frontend:
                 flow, valid = self._induced_flow([todo[n] for n in wide])
                 size = self.images[todo[wide[0]][0]].shape[:2]
                 for m, n in enumerate(wide):
-                    init[n] = self._full_res_flow(flow[m], valid[m], size)
-        for (i, j), f0 in zip(todo, init):
-            c = self.correspondence.match(self.images[i], self.images[j], init_flow=f0)
-            self.cache.put(i, j, c.target, c.weight)
-            if self._segmenting:
-                d = epipolar_distance(c.flow, c.weight[..., 0].numpy())
-                if d is not None:
-                    self._epipolar[(i, j)] = (d, c.weight)
+                    init[n] = self.full_res_flow(flow[m], valid[m], size)
+        first = dict(zip(todo, init))
+        done: set[tuple[int, int]] = set()
+        for (i, j), f0 in first.items():
+            if (i, j) in done:
+                continue
+            if (j, i) in first and (j, i) not in done:  # both directions from one forward-backward pair
+                results = zip([(i, j), (j, i)], self.correspondence.match_pair(self.images[i], self.images[j], f0))
+            else:
+                results = [((i, j), self.correspondence.match(self.images[i], self.images[j], init_flow=f0))]
+            for key, c in results:
+                done.add(key)
+                self._store(key, c)
         if self._segmenting:
             self._mask_movers({i for i, _ in todo})
+
+    def _store(self, key: tuple[int, int], c) -> None:
+        self.cache.put(*key, c.target, c.weight, born=self.shared.iterations)
+        if self._segmenting:
+            d = epipolar_distance(c.flow, c.weight[..., 0].numpy())
+            if d is not None:
+                self._epipolar[key] = (d, c.weight)
 
     def _mask_movers(self, frames: set[int]) -> None:
         """Zero the confidence of the epipolar movers of these keyframes' outgoing edges.
@@ -125,26 +152,42 @@ class Frontend:
         fixed = 1 if lo == 0 else min(2, hi - lo - 1)
         return run_window(self.backend, self.buffer, lo, hi, edges, self.params, self.shared, iters, fixed)
 
+    def distance(self, ii: list[int], jj: list[int]) -> torch.Tensor:
+        """Frame distances d(i, j) in grid px under the current poses and disparities."""
+        buf = self.buffer
+        return frame_distance(buf.poses[:len(buf)], buf.disps[:len(buf)], self.shared.intrinsics,
+                              torch.tensor(ii, dtype=torch.long), torch.tensor(jj, dtype=torch.long),
+                              self.fcfg.beta, self.params.min_depth)
+
     # ------------------------------------------------------------------ public
     def add_keyframe(self, frame_index: int, timestamp: float, image: np.ndarray, thumbnail: np.ndarray,
                      features: torch.Tensor | None, depth_prior: torch.Tensor | None) -> int:
-        """Insert a keyframe and run initialisation or the window update."""
+        """Insert a keyframe and run initialisation or the window update; returns its index."""
         buf = self.buffer
         k = len(buf)
         if self.initialised and k >= 2:
             pose = extrapolate(buf.poses[k - 2], buf.poses[k - 1], self.fcfg.velocity_damping)
-            disp = float(buf.disps[k - 1].median())
+            disp = transfer_disparity(buf.poses[k - 1], buf.disps[k - 1], pose, self.shared.intrinsics,
+                                      self.params.min_depth)
         else:
             pose, disp = torch.tensor([0, 0, 0, 0, 0, 0, 1.0]), 1.0
         buf.append(frame_index, timestamp, pose, disp, thumbnail, features, depth_prior)
         self.images[k] = image
         if not self.initialised:
-            if len(buf) >= self.fcfg.warmup:
+            if self._ready(k):
                 self._initialise()
         else:
-            self._update(k)
+            k = self._update(k)
         self._evict(k)
         return k
+
+    def _ready(self, k: int) -> bool:
+        """Enough keyframes, and (below ``warmup``) enough parallax, to initialise."""
+        f = self.fcfg
+        n = k + 1
+        if n >= f.warmup:
+            return True
+        return n >= max(2, f.warmup_min) and homography_parallax(self.images[0], self.images[k]) >= f.init_parallax
 
     def _initialise(self) -> None:
         buf, f = self.buffer, self.fcfg
@@ -161,20 +204,47 @@ class Frontend:
         self._optimise(0, n, graph.init_pairs(n, init_radius), f.iters1 + f.iters2)
         self.initialised = True
 
-    def _update(self, k: int) -> None:
+    def _proximity(self, k: int, lo: int) -> list[tuple[int, int]]:
+        """Proximity pairs of the newest keyframes within the window (DROID's frontend rule)."""
+        f = self.fcfg
+        cand = [(i, j) for i in range(max(lo, k - PROXIMITY_RECENT + 1), k + 1)
+                for j in range(lo, i - f.radius) if (i, j) not in self.cache]
+        if not cand:
+            return []
+        dist = self.distance([i for i, _ in cand], [j for _, j in cand])
+        existing = {p for p in self.cache.pairs() if min(p) >= lo}
+        return graph.select_proximity(cand, dist, f.flow_thresh, f.nms, existing, f.proximity_max)
+
+    def _update(self, k: int) -> int:
+        """Window BA for the new keyframe k; returns its index after a possible removal."""
         f = self.fcfg
         lo = max(0, k - f.window + 1)
-        pairs = graph.radius_pairs(k, lo, f.radius)
-        candidates = list(range(lo, k - f.radius))
-        if candidates:
-            flow, valid = self._induced_flow([(k, c) for c in candidates])
-            mag = (flow.norm(dim=-1) * valid).sum((1, 2)) / valid.sum((1, 2)).clamp(min=1)
-            mag = torch.where(valid.float().mean((1, 2)) > 0.5, mag * 8.0, torch.full_like(mag, float("inf")))
-            pairs += graph.select_proximity(k, candidates, mag, f.flow_thresh, limit=3)
+        pairs = graph.radius_pairs(k, lo, f.radius) + self._proximity(k, lo)
         self._match(pairs, use_prior=True)
-        window = [p for p in self.cache.pairs() if min(p) >= lo]
+        self._window_ba(lo, k, f.iters1)
+        span = self.buffer.frame_index[k] - self.buffer.frame_index[k - 2] if k >= 2 else 0
+        if k - 1 >= 1 and span <= f.removal_max_span and float(self.distance([k - 2], [k - 1])[0]) < f.keyframe_thresh:
+            self._remove(k - 1)
+            return k - 1
+        self._window_ba(lo, k, f.iters2)
+        return k
+
+    def _window_ba(self, lo: int, k: int, iters: int) -> None:
+        f = self.fcfg
+        window = self.cache.young_pairs(self.shared.iterations, f.max_age, lo)
         window = graph.cap_edges(window, f.max_edges)
-        self._optimise(lo, k + 1, window, f.iters1 + f.iters2)
+        self._optimise(lo, k + 1, window, iters)
+
+    def _remove(self, k: int) -> None:
+        """Keyframe removal: drop keyframe k with its edges and renumber the later ones."""
+        self.buffer.remove(k)
+        self.cache.remove_frame(k)
+
+        def renumber(i: int) -> int:
+            return i - (i > k)
+
+        self.images = {renumber(i): v for i, v in self.images.items() if i != k}
+        self._epipolar = {(renumber(a), renumber(b)): v for (a, b), v in self._epipolar.items() if k not in (a, b)}
 
     def evidence(self) -> torch.Tensor | None:
         """Evidence channels of every keyframe from all cached edges (None when unused)."""

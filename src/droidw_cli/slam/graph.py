@@ -19,9 +19,15 @@ from droidw_cli.ba.types import EdgeSet
 
 @dataclass
 class EdgeCache:
-    """Correspondence targets and confidences per directed keyframe edge (i, j)."""
+    """Correspondence targets and confidences per directed keyframe edge (i, j).
+
+    ``born`` holds the BA iteration count at which each edge was added, so
+    that the window BA can retire edges after ``max_age`` iterations (the
+    global BA still uses them all).
+    """
 
     targets: dict[tuple[int, int], tuple[Tensor, Tensor]] = field(default_factory=dict)
+    born: dict[tuple[int, int], int] = field(default_factory=dict)
 
     def __contains__(self, key: tuple[int, int]) -> bool:
         return key in self.targets
@@ -29,11 +35,25 @@ class EdgeCache:
     def __len__(self) -> int:
         return len(self.targets)
 
-    def put(self, i: int, j: int, target: Tensor, weight: Tensor) -> None:
+    def put(self, i: int, j: int, target: Tensor, weight: Tensor, born: int | None = None) -> None:
         self.targets[(i, j)] = (target.to(torch.float32), weight.to(torch.float16))
+        if born is not None or (i, j) not in self.born:
+            self.born[(i, j)] = 0 if born is None else born
 
     def pairs(self) -> list[tuple[int, int]]:
         return list(self.targets.keys())
+
+    def young_pairs(self, now: int, max_age: int, lo: int = 0) -> list[tuple[int, int]]:
+        """Pairs with both ends ≥ lo added at most ``max_age`` iterations before ``now``."""
+        return [p for p, b in self.born.items() if min(p) >= lo and now - b <= max_age]
+
+    def remove_frame(self, k: int) -> None:
+        """Forget keyframe k's edges and renumber the later keyframes down by one."""
+        def shift(p: tuple[int, int]) -> tuple[int, int]:
+            return (p[0] - (p[0] > k), p[1] - (p[1] > k))
+
+        self.targets = {shift(p): v for p, v in self.targets.items() if k not in p}
+        self.born = {shift(p): v for p, v in self.born.items() if k not in p}
 
     def edge_set(self, pairs: list[tuple[int, int]], offset: int = 0) -> EdgeSet:
         """Stack cached edges into an :class:`EdgeSet` with indices shifted by ``-offset``."""
@@ -60,19 +80,29 @@ def init_pairs(n: int, radius: int) -> list[tuple[int, int]]:
     return [(i, j) for i in range(n) for j in range(n) if i != j and abs(i - j) <= radius]
 
 
-def select_proximity(k: int, candidates: list[int], mean_flow: Tensor, thresh: float, limit: int) -> list[tuple[int, int]]:
-    """Proximity edges from keyframe k to the candidates whose induced mean flow is below ``thresh``.
+def select_proximity(candidates: list[tuple[int, int]], distance: Tensor, thresh: float, nms: int,
+                     existing: set[tuple[int, int]], limit: int) -> list[tuple[int, int]]:
+    """Proximity pairs (DROID-SLAM): the closest candidate pairs under ``thresh``, with non-maximum suppression.
 
-    ``mean_flow`` (len(candidates),) holds the induced flow magnitude k → candidate.
-    The closest (smallest flow) come first; at most ``limit`` pairs, both directions.
+    ``candidates`` are unordered pairs (i, j) and ``distance`` their frame
+    distances.  A pair is suppressed when it lies within ``nms`` keyframes of
+    an existing or already chosen pair, i.e. |i − i'| ≤ nms and |j − j'| ≤ nms
+    (in either orientation).  At most ``limit`` pairs; returned both directions.
     """
-    order = torch.argsort(mean_flow)
-    out = []
-    for idx in order.tolist():
-        if float(mean_flow[idx]) >= thresh or len(out) >= 2 * limit:
+    taken = {(min(p), max(p)) for p in existing}
+
+    def suppressed(i: int, j: int) -> bool:
+        return any(abs(i - a) <= nms and abs(j - b) <= nms for a, b in taken)
+
+    out: list[tuple[int, int]] = []
+    for idx in torch.argsort(distance).tolist():
+        if float(distance[idx]) >= thresh or len(out) >= 2 * limit:
             break
-        j = candidates[idx]
-        out += [(k, j), (j, k)]
+        i, j = sorted(candidates[idx])
+        if suppressed(i, j):
+            continue
+        taken.add((i, j))
+        out += [(i, j), (j, i)]
     return out
 
 

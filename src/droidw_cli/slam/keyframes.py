@@ -65,3 +65,17 @@ class KeyframeBuffer:
         self.thumbnails.append(thumbnail)
         self.count += 1
         return k
+
+    def remove(self, k: int) -> None:
+        """Drop keyframe k; the later ones move down by one (DROID's keyframe removal)."""
+        if not 0 <= k < self.count:
+            raise IndexError(f"keyframe {k} out of range [0, {self.count})")
+        n = self.count
+        tensors = [self.poses, self.disps, self.depth_prior] + ([self.features] if self.features is not None else [])
+        for t in tensors:
+            t[k:n - 1] = t[k + 1:n].clone()
+        self.poses[n - 1] = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
+        self.disps[n - 1] = 1.0
+        for seq in (self.frame_index, self.timestamps, self.thumbnails):
+            del seq[k]
+        self.count -= 1

@@ -1,14 +1,14 @@
 """The motion filter: which frames become keyframe candidates.
 
 A frame is a candidate when the mean optical flow from the last keyframe is
-at least ``thresh`` px at the working resolution, or when ``max_gap`` frames
-have passed.  Before initialisation the test uses the *median* flow and no
+at least ``thresh`` pixels of the 1/8 BA grid (DROID's unit: 3 grid px is
+24 px at a 384×512 working size), or when ``max_gap`` frames have passed.  Before initialisation the test uses the *median* flow and no
 forced keyframes, so a fixed camera watching movers (whose pixels are a
 minority) never produces a map from people walking by.
 
 The flow here is a cheap DIS FAST estimate on a half-size grey image (ULTRAFAST
 at 1/4 size reads 1-5 px of spurious mean flow on a fixed camera watching
-pedestrians, too close to the 3 px threshold).
+pedestrians).
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from droidw_cli.config import MotionFilterConfig
+from droidw_cli.geometry.camera import BA_SCALE
 
 _SCALE = 2  # the filter's flow runs at 1/2 of the working resolution
 
@@ -31,7 +32,7 @@ def grey_small(image: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FlowStats:
-    """Flow magnitude statistics in working-resolution pixels."""
+    """Flow magnitude statistics in grid pixels (working-resolution px / 8)."""
 
     mean: float
     median: float
@@ -48,7 +49,7 @@ class MotionFilter:
 
     def flow_stats(self, grey_a: np.ndarray, grey_b: np.ndarray) -> FlowStats:
         flow = self._dis.calc(grey_a, grey_b, None)
-        mag = np.linalg.norm(flow, axis=2) * _SCALE
+        mag = np.linalg.norm(flow, axis=2) * (_SCALE / BA_SCALE)
         return FlowStats(float(mag.mean()), float(np.median(mag)))
 
     def check(self, image: np.ndarray, initialised: bool) -> tuple[bool, FlowStats]:

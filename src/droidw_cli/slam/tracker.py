@@ -28,7 +28,7 @@ from droidw_cli.slam.backend import global_ba
 from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.frontend import Frontend
 from droidw_cli.slam.motion_filter import MotionFilter
-from droidw_cli.ba.uncertainty import uncertainty_map
+from droidw_cli.ba.uncertainty import uncertainty_map, weight_factor, weighting_input
 from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.timing import StageTimer, Timed
 
@@ -82,6 +82,14 @@ def _confidence(frontend: Frontend) -> torch.Tensor:
     return conf / count.clamp(min=1)[:, None, None]
 
 
+def _keyframe_uncertainty(frontend: Frontend, evidence: torch.Tensor | None) -> torch.Tensor | None:
+    """u (K, h, w) of every keyframe under the final θ, or None when the uncertainty is off."""
+    buf, theta = frontend.buffer, frontend.shared.theta
+    if buf.features is None or theta is None or not frontend.params.uncertainty.enable:
+        return None
+    return uncertainty_map(buf.features[:len(buf)].float(), theta, frontend.params.uncertainty.softplus_offset, evidence)
+
+
 class Tracker:
     """Runs the two passes of the pipeline over one frame source."""
 
@@ -92,6 +100,14 @@ class Tracker:
         self.features = features if cfg.uncertainty.enable else None
         self.progress = progress
         self.timer = StageTimer()
+
+    def _filler_correspondence(self, frontend_corr):
+        """The filler's correspondence source: the frontend's, at the filler's DIS preset where it has one."""
+        inner = self.correspondence
+        if not hasattr(inner, "cfg") or getattr(inner.cfg, "preset", None) in (None, self.cfg.filler.preset):
+            return frontend_corr
+        other = type(inner)(dataclasses.replace(inner.cfg, preset=self.cfg.filler.preset))
+        return Timed(other, self.timer, "flow", ("match", "match_pair"))
 
     def run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
         cfg, timer = self.cfg, self.timer
@@ -109,7 +125,7 @@ class Tracker:
         k8 = torch.tensor(scale_intrinsics(np.asarray(preparer.intrinsics, dtype=np.float64), BA_SCALE), dtype=torch.float32)
         params = dataclasses.replace(cfg.ba, optimize_focal="shared") if auto else cfg.ba
         backend = Timed(self.backend, timer, "ba", ("ba_step", "uncertainty_step", "reproject"))
-        corr = Timed(self.correspondence, timer, "flow", ("match",))
+        corr = Timed(self.correspondence, timer, "flow", ("match", "match_pair"))
         channels = self.features.channels if self.features is not None else 0
         fe = Frontend(cfg, params, backend, corr, grid, k8, channels)
         mfilter = MotionFilter(cfg.motion_filter)
@@ -150,14 +166,22 @@ class Tracker:
                 raise InputError(f"{source.path}: no decodable frames")
             if not fe.initialised:
                 collected.append(
-                    f"too little parallax to build a map ({len(fe.buffer)} keyframe(s) of the {cfg.frontend.warmup} "
-                    "needed): the camera barely moved, so the trajectory stays at the identity"
+                    f"too little parallax to build a map ({len(fe.buffer)} keyframe(s); initialisation needs "
+                    f"{cfg.frontend.warmup_min} with {cfg.frontend.init_parallax:g} grid px of parallax, or "
+                    f"{cfg.frontend.warmup}): the camera barely moved, so the trajectory stays at the identity"
                 )
             with timer("global_ba"):
                 global_ba(fe, cfg.backend)
 
             evidence = fe.evidence()
-            filler = TrajectoryFiller(fe, cfg.filler.iters, evidence)
+            unc = _keyframe_uncertainty(fe, evidence)
+            # a keyframe pixel is only as good an anchor as its depth: weight it by the confidence its
+            # edges gave it in BA (zero where the epipolar masks removed a mover) and by its uncertainty
+            factors = _confidence(fe)
+            if unc is not None and cfg.filler.uncertainty:
+                mode = cfg.uncertainty.mode
+                factors = factors * weight_factor(weighting_input(unc, mode), mode)
+            filler = TrajectoryFiller(fe, cfg.filler.iters, factors, self._filler_correspondence(corr))
             with timer("filler"):
                 if fe.initialised:
                     bar = tqdm(total=len(frames), desc="fill", unit="frame", disable=not self.progress, dynamic_ncols=True)
@@ -176,10 +200,8 @@ class Tracker:
         buf = fe.buffer
         n_kf = len(buf)
         k_work = unscale_intrinsics(fe.shared.intrinsics.numpy().astype(np.float64), BA_SCALE)
-        unc = feats_np = theta = None
-        if buf.features is not None and fe.shared.theta is not None:
-            unc = uncertainty_map(buf.features[:n_kf].float(), fe.shared.theta, cfg.uncertainty.softplus_offset,
-                                  evidence).numpy()
+        feats_np = theta = None
+        if unc is not None:
             feats_np = buf.features[:n_kf].to(torch.float16).numpy()
             theta = fe.shared.theta.numpy().copy()
         wall = time.perf_counter() - t_start
@@ -194,7 +216,7 @@ class Tracker:
             kf_poses_c2w=to_matrix(invert(buf.poses[:n_kf])) if n_kf else np.zeros((0, 4, 4)),
             kf_disps=buf.disps[:n_kf].numpy().copy(),
             kf_images=np.stack(buf.thumbnails) if n_kf else np.zeros((0, 1, 1, 3), np.uint8),
-            kf_uncertainty=unc,
+            kf_uncertainty=None if unc is None else unc.numpy(),
             kf_features=feats_np,
             kf_confidence=_confidence(fe).numpy(),
             theta=theta,
