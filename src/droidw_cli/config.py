@@ -100,7 +100,7 @@ class FrontendConfig:
 
     warmup: int = 12
     warmup_min: int = 3
-    init_parallax: float = 0.3  # grid px
+    init_parallax: float = 0.15  # grid px
     init_iters: int = 40
     radius: int = 2
     window: int = 25

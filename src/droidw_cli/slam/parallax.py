@@ -6,10 +6,12 @@ adds parallax that no homography explains.  So the parallax between two
 keyframes is measured as the median residual of their dense flow after the
 best homography,
 
-    π(a, b) = median_x ‖x + f(x) − H(x)‖ / 8      (grid px),
+    π(a, b) = q₀.₈_x ‖x + f(x) − H(x)‖ / 8      (grid px),
 
-with H fitted by RANSAC to the flow at block centres (movers, a minority,
-are its outliers).  The flow is cheap: DIS FAST on half-size grey images.
+the 80th percentile over block centres, with H fitted by RANSAC to the flow
+there (movers, a minority, are its outliers).  Not the median: one plane (a
+room's back wall) can fill more than half the view, and a plane moves by a
+homography whatever the camera does.  The flow is cheap: DIS FAST on half-size grey images.
 """
 
 from __future__ import annotations
@@ -22,6 +24,8 @@ from droidw_cli.geometry.camera import BA_SCALE
 _SCALE = 2  # flow at 1/2 of the working resolution
 _BLOCK = 8  # sample the flow every _BLOCK half-size pixels
 _RANSAC_PX = 1.0  # inlier threshold, half-size px
+#: a room's back wall can fill more than half the view, and a plane is a homography: use a high quantile
+QUANTILE = 0.8
 
 
 def _grey_half(image: np.ndarray) -> np.ndarray:
@@ -46,4 +50,4 @@ def homography_parallax(image_a: np.ndarray, image_b: np.ndarray) -> float:
         return 0.0
     pred = cv2.perspectiveTransform(src[None], hom)[0]
     residual = np.linalg.norm(dst - pred, axis=1)
-    return float(np.median(residual)) * _SCALE / BA_SCALE
+    return float(np.quantile(residual, QUANTILE)) * _SCALE / BA_SCALE

@@ -1,0 +1,123 @@
+"""Keyframe management in DROID's grid units: frame distance, motion filter, proximity, removal, parallax gate."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from droidw_cli.config import MotionFilterConfig
+from droidw_cli.slam import graph
+from droidw_cli.slam.distance import frame_distance, transfer_disparity
+from droidw_cli.slam.keyframes import KeyframeBuffer
+from droidw_cli.slam.motion_filter import MotionFilter
+from droidw_cli.slam.parallax import homography_parallax
+
+K8 = torch.tensor([50.0, 50.0, 31.5, 23.5])  # 1/8-grid intrinsics of a 384×512 working image
+GRID = (48, 64)
+
+
+def _pose(t=(0.0, 0.0, 0.0), q=(0.0, 0.0, 0.0, 1.0)) -> torch.Tensor:
+    return torch.tensor([*t, *q], dtype=torch.float32)
+
+
+def test_frame_distance_of_a_sideways_translation_is_f_t_d():
+    """A fronto-parallel plane at disparity d, camera moved sideways by t: every pixel moves f·t·d grid px."""
+    d, t = 0.5, 0.2
+    poses = torch.stack([_pose(), _pose((-t, 0.0, 0.0))])  # world-to-camera: camera centre at +t
+    disps = torch.full((2, *GRID), d)
+    dist = frame_distance(poses, disps, K8, torch.tensor([0]), torch.tensor([1]), beta=0.75)
+    assert dist.item() == pytest.approx(50.0 * t * d, rel=1e-4)  # full and translation-only flows agree
+
+
+def test_frame_distance_discounts_rotation():
+    """A pure rotation: the translation-only term is zero, so d = β · (rotation flow)."""
+    angle = 0.02
+    q = (0.0, np.sin(angle / 2), 0.0, np.cos(angle / 2))
+    poses = torch.stack([_pose(), _pose(q=q)])
+    disps = torch.full((2, *GRID), 0.5)
+    full = frame_distance(poses, disps, K8, torch.tensor([0]), torch.tensor([1]), beta=1.0).item()
+    mixed = frame_distance(poses, disps, K8, torch.tensor([0]), torch.tensor([1]), beta=0.75).item()
+    assert 50.0 * angle <= full <= 1.25 * 50.0 * angle  # f·ω at the centre, f(1 + x²)·ω off it
+    assert mixed == pytest.approx(0.75 * full, rel=1e-4)
+
+
+def test_transfer_disparity_of_a_forward_move_grows_the_disparity():
+    """A plane at depth 2 seen after moving 0.5 forward is at depth 1.5: disparity 1/1.5."""
+    poses = _pose(), _pose((0.0, 0.0, -0.5))
+    out = transfer_disparity(poses[0], torch.full(GRID, 0.5), poses[1], K8)
+    assert out.shape == GRID
+    assert torch.allclose(out, torch.full(GRID, 1 / 1.5), rtol=1e-4)
+
+
+def _textured(h=384, w=512, seed=0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    small = rng.integers(0, 255, (h // 8, w // 8), dtype=np.uint8)
+    import cv2
+
+    grey = cv2.GaussianBlur(cv2.resize(small, (w + 64, h + 64), interpolation=cv2.INTER_CUBIC), (5, 5), 1.0)
+    return np.repeat(grey[..., None], 3, axis=2)
+
+
+def test_motion_filter_threshold_is_in_grid_pixels():
+    """24 working px of shift = 3 grid px: a keyframe at thresh 3.0, none at 3.5."""
+    big = _textured()
+    a, b = big[:384, 32:544], big[:384, 8:520]  # image shifted by 24 px
+    for thresh, expected in ((2.8, True), (3.5, False)):
+        mf = MotionFilter(MotionFilterConfig(thresh=thresh, max_gap=100))
+        mf.check(np.ascontiguousarray(a), False)
+        mf.accept(np.ascontiguousarray(a))
+        is_kf, stats = mf.check(np.ascontiguousarray(b), True)
+        assert stats.mean == pytest.approx(3.0, abs=0.25)
+        assert is_kf is expected
+
+
+def test_fixed_camera_makes_no_keyframe_before_initialisation():
+    img = np.ascontiguousarray(_textured()[:384, :512])
+    mf = MotionFilter(MotionFilterConfig())
+    assert mf.check(img, False)[0]  # the first frame
+    mf.accept(img)
+    assert not any(mf.check(img.copy(), False)[0] for _ in range(20))  # no max_gap before initialisation
+
+
+def test_parallax_is_small_for_a_rotation_and_large_for_a_translation():
+    """Rendered room: rotating the camera about its centre gives no parallax, moving it sideways does."""
+    from droidw_cli.synth import SynthConfig, build_scene
+    from droidw_cli.synth.paths import rot_y
+
+    scene = build_scene(SynthConfig.preset("static-small", frames=2, seed=1))
+    pose = scene.pose(0)
+    rotated, moved = pose.copy(), pose.copy()
+    rotated[:3, :3] = pose[:3, :3] @ rot_y(0.05)
+    moved[:3, 3] += pose[:3, :3] @ np.array([0.3, 0.0, 0.0])
+    first = scene.render(0)[0]
+    # this view is mostly one wall 3.5-3.8 m away: little parallax even for 30 cm (measured 0.15 grid px)
+    assert homography_parallax(first, scene.render(0, pose_c2w=rotated)[0]) < 0.08
+    assert homography_parallax(first, scene.render(0, pose_c2w=moved)[0]) > 0.12
+
+
+def test_proximity_selection_with_nms():
+    cand = [(10, 2), (10, 3), (10, 6), (9, 2), (8, 5)]
+    dist = torch.tensor([1.0, 2.0, 3.0, 4.0, 20.0])
+    out = graph.select_proximity(cand, dist, thresh=16.0, nms=1, existing=set(), limit=3)
+    # (10, 3) and (9, 2) are within 1 keyframe of (10, 2); (8, 5) is over the threshold
+    assert out == [(2, 10), (10, 2), (6, 10), (10, 6)]
+    # an existing edge suppresses its neighbourhood too
+    out = graph.select_proximity(cand, dist, 16.0, 1, existing={(9, 3)}, limit=3)
+    assert (2, 10) not in out and (6, 10) in out
+
+
+def test_keyframe_removal_renumbers_buffer_and_edges():
+    buf = KeyframeBuffer((2, 3), capacity=2)
+    for n in range(4):
+        buf.append(10 * n, float(n), _pose((float(n), 0, 0)), float(n + 1), np.zeros((1, 1, 3), np.uint8))
+    buf.remove(2)
+    assert len(buf) == 3 and buf.frame_index == [0, 10, 30]
+    assert buf.poses[2, 0].item() == 3.0 and buf.disps[2, 0, 0].item() == 4.0
+    cache = graph.EdgeCache()
+    for p in [(0, 1), (1, 2), (2, 3), (3, 1)]:
+        cache.put(*p, torch.zeros(2, 3, 2), torch.ones(2, 3, 2), born=5)
+    cache.remove_frame(2)
+    assert sorted(cache.pairs()) == [(0, 1), (2, 1)]
+    assert cache.young_pairs(now=50, max_age=50) == cache.pairs()
+    assert cache.young_pairs(now=56, max_age=50) == []
