@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 TUM_FOCAL_640 = 525.0  # the TUM RGB-D nominal focal length at 640×480
+MOTIONS = ("handheld", "wobble", "rotate", "stopgo", "fixed")  # camera path families, see synth.motions
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,11 @@ class SynthConfig:
     cover more).  ``camera_speed`` and ``mover_speed`` scale time for the
     camera path and the walkers (2.0 = twice the motion per frame).  ``noise_std`` adds Gaussian pixel noise
     (grey levels, 0-255 scale) to the colour images only.
+
+    ``motion`` picks the camera path family (:data:`MOTIONS`, see
+    :mod:`droidw_cli.synth.motions`): ``handheld`` (the default, a room-scale
+    walk), ``wobble`` (near-still hand), ``rotate`` (fast roll/pitch/yaw on
+    the spot), ``stopgo`` (the handheld path with full stops) or ``fixed``.
     """
 
     width: int = 640
@@ -65,6 +71,7 @@ class SynthConfig:
     mover_speed: float = 1.0
     depth_scale: float = 5000.0
     max_depth: float = 10.0
+    motion: str = "handheld"
 
     def __post_init__(self) -> None:
         if int(self.width) != self.width or int(self.height) != self.height or self.width < 16 or self.height < 16:
@@ -87,6 +94,8 @@ class SynthConfig:
             raise ValueError("camera_speed and mover_speed must be >= 0")
         if not (0 < self.depth_scale and 0 < self.max_depth and self.max_depth * self.depth_scale <= 65535):
             raise ValueError("need depth_scale > 0, max_depth > 0 and max_depth * depth_scale <= 65535 (16-bit PNG)")
+        if self.motion not in MOTIONS:
+            raise ValueError(f"unknown motion {self.motion!r} (use one of {', '.join(MOTIONS)})")
 
     # -- derived values ---------------------------------------------------
     @property

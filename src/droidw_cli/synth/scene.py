@@ -1,5 +1,8 @@
 """The synthetic scene: room, furniture, walkers on their paths, camera path, texture atlas.
 
+The camera path is the family ``cfg.motion`` (:mod:`droidw_cli.synth.motions`);
+everything below only uses its ``position``, ``target`` and ``pose``.
+
 Coverage of the image by walkers is estimated cheaply by casting rays at
 48 × 36 (for 4:3 images) against the walkers' boxes only, on up to 90 frames
 spread over the sequence.
@@ -27,7 +30,8 @@ from droidw_cli.geometry.camera import scale_intrinsics
 from droidw_cli.synth import layout
 from droidw_cli.synth.atlas import AtlasBuilder
 from droidw_cli.synth.config import SynthConfig, SynthFrame
-from droidw_cli.synth.paths import CameraPath, EllipseWalk, make_walk, random_camera_path
+from droidw_cli.synth.motions import CameraMotion, camera_motion
+from droidw_cli.synth.paths import EllipseWalk, make_walk
 from droidw_cli.synth.raycast import Box, RayCaster, box_hits, shade
 
 COVER_WIDTH = 48
@@ -103,7 +107,7 @@ class _CloseWalkFactory:
     It slides sideways (keeping d) to stay inside the room.
     """
 
-    def __init__(self, rng: np.random.Generator, room: np.ndarray, camera: CameraPath, t_cam: float, t_walk: float):
+    def __init__(self, rng: np.random.Generator, room: np.ndarray, camera: CameraMotion, t_cam: float, t_walk: float):
         self.room, self.t_walk = room, t_walk
         pos, tgt = camera.position(t_cam), camera.target(t_cam)
         fwd = (tgt - pos)[:2]
@@ -176,7 +180,7 @@ class Scene:
         self.cfg = cfg
         seed = cfg.seed
         self.room = layout.room_size(seed)
-        self.camera = random_camera_path(np.random.default_rng([seed, layout.TAG_CAMERA]), self.room)
+        self.camera = camera_motion(cfg.motion, seed, self.room)
         room_spec = layout.room_spec(seed, self.room)
         furniture = layout.furniture_specs(seed, self.room)
         walker_parts = [layout.walker_specs(seed, i) for i in range(cfg.n_movers)]
