@@ -50,6 +50,18 @@ class SynthConfig:
     :mod:`droidw_cli.synth.motions`): ``handheld`` (the default, a room-scale
     walk), ``wobble`` (near-still hand), ``rotate`` (fast roll/pitch/yaw on
     the spot), ``stopgo`` (the handheld path with full stops) or ``fixed``.
+
+    Photometric options (all off by default; they change the colour images
+    only, never depth, mask or pose, which stay those of the frame's centre
+    time), applied in this order:
+
+    * ``blur``: motion blur over an exposure of ``blur`` frame intervals; up
+      to ``blur_samples`` sub-frames (fewer when the image moves less) are
+      averaged in linear intensity (see :mod:`droidw_cli.synth.exposure`);
+    * ``gain_drift``: slow exposure gain 1 ± gain_drift, plus per-frame
+      ``flicker`` (relative standard deviation);
+    * ``noise_std`` as above;
+    * ``jpeg_quality``: 1-100 passes the image through OpenCV JPEG (0 = off).
     """
 
     width: int = 640
@@ -72,6 +84,11 @@ class SynthConfig:
     depth_scale: float = 5000.0
     max_depth: float = 10.0
     motion: str = "handheld"
+    blur: float = 0.0
+    blur_samples: int = 7
+    jpeg_quality: int = 0
+    gain_drift: float = 0.0
+    flicker: float = 0.0
 
     def __post_init__(self) -> None:
         if int(self.width) != self.width or int(self.height) != self.height or self.width < 16 or self.height < 16:
@@ -96,6 +113,14 @@ class SynthConfig:
             raise ValueError("need depth_scale > 0, max_depth > 0 and max_depth * depth_scale <= 65535 (16-bit PNG)")
         if self.motion not in MOTIONS:
             raise ValueError(f"unknown motion {self.motion!r} (use one of {', '.join(MOTIONS)})")
+        if not 0.0 <= self.blur <= 1.0:
+            raise ValueError(f"blur must be in [0, 1] (a fraction of the frame interval), got {self.blur}")
+        if int(self.blur_samples) != self.blur_samples or self.blur_samples < 1:
+            raise ValueError(f"blur_samples must be an integer >= 1, got {self.blur_samples}")
+        if int(self.jpeg_quality) != self.jpeg_quality or not 0 <= self.jpeg_quality <= 100:
+            raise ValueError(f"jpeg_quality must be an integer in [0, 100] (0 = off), got {self.jpeg_quality}")
+        if not 0.0 <= self.gain_drift < 1.0 or not 0.0 <= self.flicker < 0.25:
+            raise ValueError(f"need 0 <= gain_drift < 1 and 0 <= flicker < 0.25, got {self.gain_drift}, {self.flicker}")
 
     # -- derived values ---------------------------------------------------
     @property
