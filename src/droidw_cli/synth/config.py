@@ -159,6 +159,12 @@ class SynthConfig:
 
         ``static`` / ``dynamic`` / ``busy`` (no, 3 and 4 walkers; 640×480,
         300 frames) and ``*-small`` variants (320×240, 40 frames) for tests.
+        Realistic 640×480 presets with blur, noise, JPEG and gain drift for the
+        tracking benchmarks: ``walk`` (handheld, 2 walkers, 450 frames) and
+        ``walk-static`` (the same room and path, no walkers), ``wobble``
+        (near-still hand, a walker crossing close), ``rotate`` (fast rotation
+        on the spot, 4 walkers), ``stopgo`` (handheld with full stops) and
+        ``fixed`` (a still camera, 3 walkers, 300 frames).
         """
         if name not in PRESETS:
             raise ValueError(f"unknown synth preset {name!r} (use one of {', '.join(sorted(PRESETS))})")
@@ -177,6 +183,18 @@ PRESETS: dict[str, dict] = {
     "dynamic-small": {"movers": 3, **_SMALL},
     "busy-small": {"movers": 4, **_SMALL},
 }
+_WALK = {"motion": "handheld", "movers": 2, "blur": 0.4, "jpeg_quality": 75, "noise_std": 1.5, "gain_drift": 0.08,
+         "frames": 450}
+PRESETS.update({
+    "walk": _WALK,
+    "walk-static": {**_WALK, "static": True, "movers": 0},
+    "wobble": {"motion": "wobble", "movers": 2, "target_coverage": 0.45, "blur": 0.3, "jpeg_quality": 75,
+               "noise_std": 1.5, "frames": 450},
+    "rotate": {"motion": "rotate", "movers": 4, "blur": 0.5, "jpeg_quality": 60, "noise_std": 2.0, "gain_drift": 0.1,
+               "frames": 450},
+    "stopgo": {"motion": "stopgo", "movers": 2, "blur": 0.4, "jpeg_quality": 75, "frames": 450},
+    "fixed": {"motion": "fixed", "movers": 3, "jpeg_quality": 75, "noise_std": 1.5, "frames": 300},
+})
 
 
 @dataclass(frozen=True, eq=False)
