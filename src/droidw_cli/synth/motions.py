@@ -18,7 +18,7 @@ are sums of sines Σᵢ aᵢ sin(ωᵢ t + φᵢ) with random phases, see
 ``wobble``  a near-still hand:  p(t) = p₀ + s(t) with per-axis waves of a
     centimetre or two plus a millimetre of tremor (periods 0.25-0.4 s), and
     R(t) = R_lookat(p(t), L) · R_z(roll) R_x(pitch) R_y(yaw) with a fixed target
-    L and wobble waves of 1-2.5° per axis: about 5 cm and 7° peak to peak.
+    L and wobble waves of 2-3° amplitude per axis: about 6 cm and 7° peak to peak.
 
 ``rotate``  fast rotation on the spot:  p(t) = c + s(t) (±5 cm per axis) and
 
@@ -63,6 +63,8 @@ DEG = np.pi / 180.0
 
 
 class CameraMotion(Protocol):
+    """What the scene needs of a camera path (every method vectorised over t, in seconds)."""
+
     def position(self, t) -> np.ndarray: ...
 
     def target(self, t) -> np.ndarray: ...
