@@ -8,6 +8,7 @@ import time
 import click
 
 from droidw_cli.errors import UserError
+from droidw_cli.synth.config import MOTIONS, PRESETS
 
 
 def _parse_size(ctx, param, value: str | None) -> tuple[int, int] | None:
@@ -24,8 +25,7 @@ def _parse_size(ctx, param, value: str | None) -> tuple[int, int] | None:
 
 @click.command("synth")
 @click.argument("out_dir", type=click.Path(file_okay=False, writable=True))
-@click.option("--preset", default="dynamic", show_default=True,
-              type=click.Choice(["static", "dynamic", "busy", "static-small", "dynamic-small", "busy-small"]),
+@click.option("--preset", default="dynamic", show_default=True, type=click.Choice(list(PRESETS)),
               help="Starting configuration; the options below override it.")
 @click.option("--frames", type=click.IntRange(min=1), default=None, help="Number of frames [preset: 300].")
 @click.option("--seed", type=int, default=0, show_default=True,
@@ -34,19 +34,30 @@ def _parse_size(ctx, param, value: str | None) -> tuple[int, int] | None:
 @click.option("--size", callback=_parse_size, default=None, metavar="WxH", help="Image size [preset: 640x480].")
 @click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=None, help="Frame rate [30].")
 @click.option("--noise", type=click.FloatRange(min=0), default=None, help="Gaussian pixel noise std, grey levels [0].")
+@click.option("--motion", type=click.Choice(list(MOTIONS)), default=None,
+              help="Camera path: handheld walk, near-still wobble, fast rotate, stopgo, fixed [handheld].")
+@click.option("--blur", type=click.FloatRange(0, 1), default=None,
+              help="Motion blur: exposure as a fraction of the frame interval, e.g. 0.5 [0 = off].")
+@click.option("--jpeg", type=click.IntRange(0, 100), default=None, help="JPEG quality of the colour images [0 = off].")
+@click.option("--gain-drift", type=click.FloatRange(0, 1, max_open=True), default=None,
+              help="Slow exposure gain change, e.g. 0.1 = ±10 % [0].")
 @click.option("--static", "static", is_flag=True, help="No movers: a static scene.")
 @click.option("--video", is_flag=True, help="Also write video.mp4 (video.avi if mp4v is unavailable).")
 @click.option("--overwrite", is_flag=True, help="Replace OUT_DIR if it exists and is not empty.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 def synth(out_dir: str, preset: str, frames: int | None, seed: int, movers: int | None, size, fps: float | None,
-          noise: float | None, static: bool, video: bool, overwrite: bool, quiet: bool) -> None:
+          noise: float | None, motion: str | None, blur: float | None, jpeg: int | None, gain_drift: float | None,
+          static: bool, video: bool, overwrite: bool, quiet: bool) -> None:
     """Generate a synthetic room with walking people and write it as a TUM-style folder.
 
     \b
     OUT_DIR gets rgb/, depth/ (16-bit, ×5000), mask/ (255 = moving), rgb.txt,
     depth.txt, groundtruth.txt (camera-to-world, TUM), calib.txt (fx fy cx cy).
-    Example:
+    Presets walk, walk-static, wobble, rotate, stopgo and fixed add camera
+    motions, motion blur, noise, JPEG and gain drift (realistic 640x480).
+    Examples:
       droidw synth seq/ --frames 300 --movers 3 --video
+      droidw synth seq/ --preset rotate --blur 0.3
     """
     from droidw_cli.synth import SynthConfig, write_sequence
 
@@ -59,8 +70,10 @@ def synth(out_dir: str, preset: str, frames: int | None, seed: int, movers: int 
         overrides["width"], overrides["height"] = size
     if fps is not None:
         overrides["fps"] = fps
-    if noise is not None:
-        overrides["noise_std"] = noise
+    for key, value in (("noise_std", noise), ("motion", motion), ("blur", blur), ("jpeg_quality", jpeg),
+                       ("gain_drift", gain_drift)):
+        if value is not None:
+            overrides[key] = value
     if static:
         overrides["static"] = True
     elif movers:
@@ -73,5 +86,5 @@ def synth(out_dir: str, preset: str, frames: int | None, seed: int, movers: int 
     path = write_sequence(cfg, out_dir, video=video, progress=not quiet, overwrite=overwrite)
     elapsed = time.perf_counter() - start
     if not quiet:
-        click.echo(f"wrote {cfg.frames} frames ({cfg.width}x{cfg.height}, {cfg.n_movers} movers, seed {cfg.seed}) "
-                   f"to {path} in {elapsed:.1f} s ({cfg.frames / max(elapsed, 1e-9):.1f} frames/s)")
+        click.echo(f"wrote {cfg.frames} frames ({cfg.width}x{cfg.height}, {cfg.n_movers} movers, {cfg.motion} camera, "
+                   f"seed {cfg.seed}) to {path} in {elapsed:.1f} s ({cfg.frames / max(elapsed, 1e-9):.1f} frames/s)")

@@ -1,9 +1,12 @@
 """A synthetic dynamic-scene generator with exact ground truth.
 
-A textured room with furniture, a handheld camera and people ("walkers",
-textured boxes) walking through it.  Per frame: colour, z-depth, the mask of
-walker pixels and the camera pose — all exact, for tests, benchmarks and
-``droidw demo``.
+A textured room with furniture, a moving camera (handheld, wobbling,
+rotating, stop-and-go or fixed: :mod:`~droidw_cli.synth.motions`) and people
+("walkers", textured boxes) walking through it.  Per frame: colour, z-depth,
+the mask of walker pixels and the camera pose — all exact, for tests,
+benchmarks and ``droidw demo``.  The colour can get motion blur, gain drift,
+noise and JPEG artefacts (:mod:`~droidw_cli.synth.photometric`); the ground
+truth never does.
 
     >>> cfg = SynthConfig.preset("dynamic-small", seed=3)
     >>> for frame in render_sequence(cfg): ...        # streaming

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 TUM_FOCAL_640 = 525.0  # the TUM RGB-D nominal focal length at 640×480
+MOTIONS = ("handheld", "wobble", "rotate", "stopgo", "fixed")  # camera path families, see synth.motions
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,23 @@ class SynthConfig:
     cover more).  ``camera_speed`` and ``mover_speed`` scale time for the
     camera path and the walkers (2.0 = twice the motion per frame).  ``noise_std`` adds Gaussian pixel noise
     (grey levels, 0-255 scale) to the colour images only.
+
+    ``motion`` picks the camera path family (:data:`MOTIONS`, see
+    :mod:`droidw_cli.synth.motions`): ``handheld`` (the default, a room-scale
+    walk), ``wobble`` (near-still hand), ``rotate`` (fast roll/pitch/yaw on
+    the spot), ``stopgo`` (the handheld path with full stops) or ``fixed``.
+
+    Photometric options (all off by default; they change the colour images
+    only, never depth, mask or pose, which stay those of the frame's centre
+    time), applied in this order:
+
+    * ``blur``: motion blur over an exposure of ``blur`` frame intervals; up
+      to ``blur_samples`` sub-frames (fewer when the image moves less) are
+      averaged in linear intensity (see :mod:`droidw_cli.synth.exposure`);
+    * ``gain_drift``: slow exposure gain 1 ± gain_drift, plus per-frame
+      ``flicker`` (relative standard deviation);
+    * ``noise_std`` as above;
+    * ``jpeg_quality``: 1-100 passes the image through OpenCV JPEG (0 = off).
     """
 
     width: int = 640
@@ -65,6 +83,12 @@ class SynthConfig:
     mover_speed: float = 1.0
     depth_scale: float = 5000.0
     max_depth: float = 10.0
+    motion: str = "handheld"
+    blur: float = 0.0
+    blur_samples: int = 7
+    jpeg_quality: int = 0
+    gain_drift: float = 0.0
+    flicker: float = 0.0
 
     def __post_init__(self) -> None:
         if int(self.width) != self.width or int(self.height) != self.height or self.width < 16 or self.height < 16:
@@ -87,6 +111,16 @@ class SynthConfig:
             raise ValueError("camera_speed and mover_speed must be >= 0")
         if not (0 < self.depth_scale and 0 < self.max_depth and self.max_depth * self.depth_scale <= 65535):
             raise ValueError("need depth_scale > 0, max_depth > 0 and max_depth * depth_scale <= 65535 (16-bit PNG)")
+        if self.motion not in MOTIONS:
+            raise ValueError(f"unknown motion {self.motion!r} (use one of {', '.join(MOTIONS)})")
+        if not 0.0 <= self.blur <= 1.0:
+            raise ValueError(f"blur must be in [0, 1] (a fraction of the frame interval), got {self.blur}")
+        if int(self.blur_samples) != self.blur_samples or self.blur_samples < 1:
+            raise ValueError(f"blur_samples must be an integer >= 1, got {self.blur_samples}")
+        if int(self.jpeg_quality) != self.jpeg_quality or not 0 <= self.jpeg_quality <= 100:
+            raise ValueError(f"jpeg_quality must be an integer in [0, 100] (0 = off), got {self.jpeg_quality}")
+        if not 0.0 <= self.gain_drift < 1.0 or not 0.0 <= self.flicker < 0.25:
+            raise ValueError(f"need 0 <= gain_drift < 1 and 0 <= flicker < 0.25, got {self.gain_drift}, {self.flicker}")
 
     # -- derived values ---------------------------------------------------
     @property
@@ -125,6 +159,12 @@ class SynthConfig:
 
         ``static`` / ``dynamic`` / ``busy`` (no, 3 and 4 walkers; 640×480,
         300 frames) and ``*-small`` variants (320×240, 40 frames) for tests.
+        Realistic 640×480 presets with blur, noise, JPEG and gain drift for the
+        tracking benchmarks: ``walk`` (handheld, 2 walkers, 450 frames) and
+        ``walk-static`` (the same room and path, no walkers), ``wobble``
+        (near-still hand, a walker crossing close), ``rotate`` (fast rotation
+        on the spot, 4 walkers), ``stopgo`` (handheld with full stops) and
+        ``fixed`` (a still camera, 3 walkers, 300 frames).
         """
         if name not in PRESETS:
             raise ValueError(f"unknown synth preset {name!r} (use one of {', '.join(sorted(PRESETS))})")
@@ -143,6 +183,18 @@ PRESETS: dict[str, dict] = {
     "dynamic-small": {"movers": 3, **_SMALL},
     "busy-small": {"movers": 4, **_SMALL},
 }
+_WALK = {"motion": "handheld", "movers": 2, "blur": 0.4, "jpeg_quality": 75, "noise_std": 1.5, "gain_drift": 0.08,
+         "frames": 450}
+PRESETS.update({
+    "walk": _WALK,
+    "walk-static": {**_WALK, "static": True, "movers": 0},
+    "wobble": {"motion": "wobble", "movers": 2, "target_coverage": 0.45, "blur": 0.3, "jpeg_quality": 75,
+               "noise_std": 1.5, "frames": 450},
+    "rotate": {"motion": "rotate", "movers": 4, "blur": 0.5, "jpeg_quality": 60, "noise_std": 2.0, "gain_drift": 0.1,
+               "frames": 450},
+    "stopgo": {"motion": "stopgo", "movers": 2, "blur": 0.4, "jpeg_quality": 75, "frames": 450},
+    "fixed": {"motion": "fixed", "movers": 3, "jpeg_quality": 75, "noise_std": 1.5, "frames": 300},
+})
 
 
 @dataclass(frozen=True, eq=False)

@@ -19,6 +19,7 @@ from droidw_cli.synth import textures as tx
 from droidw_cli.synth.atlas import Material, face_normal, lambert
 
 TAG_ROOM, TAG_FURNITURE, TAG_CAMERA, TAG_WALKER, TAG_PATH, TAG_NOISE = 1, 2, 3, 100, 200, 7
+TAG_GAIN = 8  # exposure gain drift and flicker (synth.photometric)
 WALL_MARGIN = 0.95  # walkers keep this far from the walls (furniture depth + body radius)
 
 

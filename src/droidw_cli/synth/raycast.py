@@ -111,10 +111,10 @@ class RayCaster:
         d = [m[c, 0] * xs + (m[c, 1] * ys + m[c, 2]) for c in range(3)]
         with np.errstate(divide="ignore", invalid="ignore"):
             if box.inside:
-                tk = [np.where(d[c] > 0, half[c] - o[c], -half[c] - o[c]) / d[c] for c in range(3)]
+                plus = [d[c] > 0 for c in range(3)]
+                tk = [np.where(plus[c], half[c] - o[c], -half[c] - o[c]) / d[c] for c in range(3)]
                 t = np.minimum(np.minimum(tk[0], tk[1]), tk[2])
                 ok = np.isfinite(t)
-                plus = [d[c] > 0 for c in range(3)]
             else:
                 tn, tf = [], []
                 for c in range(3):
@@ -137,15 +137,22 @@ class RayCaster:
             p = [o[c] + half[c] + t * d[c] for c in range(3)]
         fu = np.where(k0, p[1], p[0])
         fv = np.where(k2, p[1], p[2])
-        face = np.where(k0, plus[0].view(np.int8), np.where(k2, 4 + plus[2].view(np.int8), 2 + plus[1].view(np.int8)))
-        table = box.faces
+        byte = [q.view(np.uint8) for q in plus]
+        face = np.where(k0, byte[0], np.where(k2, 4 + byte[2], 2 + byte[1]))
         rho, half_px = self.rho, np.float32(0.5)
-        mx = table[face, 0] + np.minimum(np.maximum(fu * rho - half_px, 0), table[face, 2])
-        my = table[face, 1] + np.minimum(np.maximum(fv * rho - half_px, 0), table[face, 3])
+        mx = _gather(box.faces, 0, face) + np.minimum(np.maximum(fu * rho - half_px, 0), _gather(box.faces, 2, face))
+        my = _gather(box.faces, 1, face) + np.minimum(np.maximum(fv * rho - half_px, 0), _gather(box.faces, 3, face))
         np.copyto(depth, t, where=win)
         np.copyto(hits.map_x[v0:v1, u0:u1], mx, where=win)
         np.copyto(hits.map_y[v0:v1, u0:u1], my, where=win)
         np.copyto(hits.dynamic[v0:v1, u0:u1], bool(box.dynamic), where=win)
+
+
+def _gather(table: np.ndarray, column: int, face: np.ndarray) -> np.ndarray:
+    """``table[face, column]`` for a uint8 face index image, as a 256-entry look-up table (faster than indexing)."""
+    lut = np.zeros(256, np.float32)
+    lut[: len(table)] = table[:, column]
+    return cv2.LUT(face, lut)
 
 
 def shade(atlas: np.ndarray, hits: Hits) -> np.ndarray:

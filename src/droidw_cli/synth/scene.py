@@ -1,5 +1,8 @@
 """The synthetic scene: room, furniture, walkers on their paths, camera path, texture atlas.
 
+The camera path is the family ``cfg.motion`` (:mod:`droidw_cli.synth.motions`);
+everything below only uses its ``position``, ``target`` and ``pose``.
+
 Coverage of the image by walkers is estimated cheaply by casting rays at
 48 × 36 (for 4:3 images) against the walkers' boxes only, on up to 90 frames
 spread over the sequence.
@@ -15,6 +18,11 @@ close to ``cfg.target_coverage``: coverage falls as d grows, so bisection
 converges; a d that brings the walker within 0.45 m of the camera at any
 frame counts as "too close".  The paths therefore depend on ``cfg.frames``
 (and fps, speeds); the room, textures and camera path do not.
+
+Rendering: frame k is cast at its own time; with ``cfg.blur`` its colour is
+the exposure average of sub-frames (:mod:`droidw_cli.synth.exposure`), then
+the photometric chain (:mod:`droidw_cli.synth.photometric`) applies gain,
+noise and JPEG.  Depth, mask and pose are always those of frame k itself.
 """
 
 from __future__ import annotations
@@ -24,10 +32,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from droidw_cli.geometry.camera import scale_intrinsics
-from droidw_cli.synth import layout
+from droidw_cli.synth import exposure, layout
 from droidw_cli.synth.atlas import AtlasBuilder
 from droidw_cli.synth.config import SynthConfig, SynthFrame
-from droidw_cli.synth.paths import CameraPath, EllipseWalk, make_walk, random_camera_path
+from droidw_cli.synth.motions import CameraMotion, camera_motion
+from droidw_cli.synth.paths import EllipseWalk, make_walk
+from droidw_cli.synth.photometric import Photometric, to_linear
 from droidw_cli.synth.raycast import Box, RayCaster, box_hits, shade
 
 COVER_WIDTH = 48
@@ -103,7 +113,7 @@ class _CloseWalkFactory:
     It slides sideways (keeping d) to stay inside the room.
     """
 
-    def __init__(self, rng: np.random.Generator, room: np.ndarray, camera: CameraPath, t_cam: float, t_walk: float):
+    def __init__(self, rng: np.random.Generator, room: np.ndarray, camera: CameraMotion, t_cam: float, t_walk: float):
         self.room, self.t_walk = room, t_walk
         pos, tgt = camera.position(t_cam), camera.target(t_cam)
         fwd = (tgt - pos)[:2]
@@ -176,7 +186,8 @@ class Scene:
         self.cfg = cfg
         seed = cfg.seed
         self.room = layout.room_size(seed)
-        self.camera = random_camera_path(np.random.default_rng([seed, layout.TAG_CAMERA]), self.room)
+        self.camera = camera_motion(cfg.motion, seed, self.room)
+        self.photometric = Photometric.of(cfg)
         room_spec = layout.room_spec(seed, self.room)
         furniture = layout.furniture_specs(seed, self.room)
         walker_parts = [layout.walker_specs(seed, i) for i in range(cfg.n_movers)]
@@ -249,7 +260,8 @@ class Scene:
         return walks  # type: ignore[return-value]
 
     # -- rendering ------------------------------------------------------------
-    def boxes(self, k: int, static: bool = True, movers: bool = True) -> list[Box]:
+    def boxes(self, k: float, static: bool = True, movers: bool = True) -> list[Box]:
+        """The boxes at (possibly fractional) frame time k."""
         out = list(self.static_boxes) if static else []
         if movers:
             t = float(self.walker_time(k))
@@ -262,18 +274,53 @@ class Scene:
         """(rgb uint8, depth float32 metres with 0 where nothing is hit, mask bool) of frame k.
 
         ``static``/``movers`` leave out the room or the walkers (for checks);
-        ``pose_c2w`` renders frame k's scene from another viewpoint.
+        ``pose_c2w`` renders frame k's scene from another viewpoint (then
+        held still through the exposure: only the walkers blur).  The colour
+        gets the config's blur, gain, noise and JPEG; depth and mask are exact.
         """
         pose = self.pose(k) if pose_c2w is None else np.asarray(pose_c2w, np.float64)
         hits = self.caster.cast(self.boxes(k, static, movers), pose)
         rgb = shade(self.atlas, hits)
         depth = hits.depth
         depth[~np.isfinite(depth)] = 0.0
-        if self.cfg.noise_std > 0:
-            rng = np.random.default_rng([self.cfg.seed, layout.TAG_NOISE, int(k)])
-            noise = rng.standard_normal(rgb.shape, dtype=np.float32) * np.float32(self.cfg.noise_std)
-            rgb = np.clip(np.rint(rgb + noise), 0, 255).astype(np.uint8)
-        return rgb, depth, hits.dynamic
+        linear = self._exposure(k, static, movers, pose_c2w, rgb, depth) if self.cfg.blur > 0 else None
+        return self.photometric.finish(k, rgb, linear), depth, hits.dynamic
+
+    def exposure_samples(self, k: int, depth: np.ndarray | None = None, static: bool = True, movers: bool = True,
+                         pose_c2w: np.ndarray | None = None) -> np.ndarray:
+        """The sub-frame times (fractional frame indices) averaged for frame k's motion blur.
+
+        ``depth`` is frame k's depth (rendered when not given); see :mod:`droidw_cli.synth.exposure`.
+        """
+        cfg = self.cfg
+        if cfg.blur <= 0:
+            return np.array([float(k)])
+        if depth is None and static:
+            depth = self.caster.cast(self.boxes(k, static, movers), self._pose_at(k, pose_c2w)).depth
+            depth[~np.isfinite(depth)] = 0.0
+        start, end = k - 0.5 * cfg.blur, k + 0.5 * cfg.blur
+        poses = (self._pose_at(start, pose_c2w), self._pose_at(end, pose_c2w))
+        corners = (exposure.box_corners(self.boxes(start, static=False, movers=movers)),
+                   exposure.box_corners(self.boxes(end, static=False, movers=movers)))
+        smear = exposure.image_motion(cfg.K, (cfg.width, cfg.height), self._pose_at(k, pose_c2w), poses,
+                                      depth if static else None, corners)
+        return k + exposure.sample_offsets(cfg.blur, exposure.sample_count(smear, cfg.blur_samples))
+
+    def _pose_at(self, s: float, pose_c2w: np.ndarray | None) -> np.ndarray:
+        return self.pose(s) if pose_c2w is None else np.asarray(pose_c2w, np.float64)
+
+    def _exposure(self, k: int, static: bool, movers: bool, pose_c2w: np.ndarray | None, rgb: np.ndarray,
+                  depth: np.ndarray) -> np.ndarray:
+        """Mean linear intensity of the exposure's sub-frames (frame k's own render ``rgb`` reused)."""
+        times = self.exposure_samples(k, depth, static, movers, pose_c2w)
+        total = np.zeros(rgb.shape, np.float32)
+        for s in times:
+            if s == k:
+                sub = rgb
+            else:
+                sub = shade(self.atlas, self.caster.cast(self.boxes(s, static, movers), self._pose_at(s, pose_c2w)))
+            total += to_linear(sub)
+        return total * np.float32(1.0 / len(times))
 
     def frame(self, k: int) -> SynthFrame:
         if not 0 <= k < self.cfg.frames:
