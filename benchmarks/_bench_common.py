@@ -24,15 +24,15 @@ def run_case_subprocess(script: str, args: list[str]) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def track_source(source, calibration, overrides: list[str], backend: str = "cpu"):
-    """Track a frame source with the default config plus overrides; returns (result, seconds)."""
+def track_source(source, calibration, overrides: list[str], backend: str = "cpu", config: str = "default"):
+    """Track a frame source with a config (default: ``default``) plus overrides; returns (result, seconds)."""
     from droidw_cli.ba.registry import get_backend
     from droidw_cli.config import load_config
     from droidw_cli.correspondence import get_correspondence_source
     from droidw_cli.features import get_feature_extractor
     from droidw_cli.slam.tracker import Tracker
 
-    cfg = load_config("default", overrides)
+    cfg = load_config(config, overrides)
     features = get_feature_extractor(cfg.features.name) if cfg.uncertainty.enable else None
     tracker = Tracker(cfg, get_backend(backend), get_correspondence_source(cfg.correspondence), features, progress=False)
     t = time.perf_counter()

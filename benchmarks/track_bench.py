@@ -1,9 +1,16 @@
-"""Tracking benchmark: frames/s, seconds per stage, peak memory and ATE on synthetic sequences.
+"""Tracking benchmark: ATE, keyframe ratio, frames/s, ms per frame by stage and peak memory.
 
-    python benchmarks/track_bench.py [--frames 300] [--size 640x480] [--seeds 1 2] [--backend cpu]
+    python benchmarks/track_bench.py [--presets walk walk-static wobble rotate stopgo fixed] [--seeds 1]
+                                     [--frames 0] [--config default] [--baseline] [--backend cpu]
                                      [--memory-minutes 0.5 1] [--set KEY=VALUE ...]
 
-Table 1: one row per sequence (static and dynamic presets, uncertainty on).
+Table 1: one row per synthetic sequence (the generator's realistic presets:
+hand-held walk with movers, its static control, a near-still wobbling
+camera with people close in front, fast roll/pitch/yaw, stop-and-go, a fixed
+camera; motion blur, JPEG, noise and gain drift as each preset sets them),
+known calibration, 640×480.  ``--frames 0`` keeps each preset's own length
+(450, 300 for ``fixed``).  ``--baseline`` adds the ATE with
+``uncertainty.enable=false``.  "ATE kf" is over keyframes only.
 Table 2: peak memory against video length (frames streamed from the
 generator, nothing on disk).  Every row runs in its own process.
 """
@@ -19,24 +26,33 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _bench_common import peak_mb, print_table, run_case_subprocess, track_source  # noqa: E402
 
 STAGES = ("decode", "motion_filter", "features", "flow", "ba", "global_ba", "filler")
+PRESETS = ("walk", "walk-static", "wobble", "rotate", "stopgo", "fixed")
 
 
 def one(args: argparse.Namespace) -> None:
     """Run one case and print a JSON line (internal: called in a subprocess)."""
+    import numpy as np
+
     from droidw_cli.eval import evaluate_ate
     from droidw_cli.io.trajectory import Trajectory
     from droidw_cli.synth import SynthConfig
     from droidw_cli.synth.source import SynthSource
 
-    w, h = (int(v) for v in args.size.split("x"))
-    cfg = SynthConfig.preset(args.preset, width=w, height=h, frames=args.frames, seed=args.seed)
+    over = {"seed": args.seed} | ({"frames": args.frames} if args.frames else {})
+    cfg = SynthConfig.preset(args.preset, **over)
     source = SynthSource(cfg)
-    result, seconds = track_source(source, source.intrinsics_hint, list(args.set), args.backend)
-    gt = Trajectory(*_ground_truth(cfg))
-    ate = evaluate_ate(gt, Trajectory(result.timestamps, result.poses_c2w)).rmse
-    print(json.dumps({"frames": len(result.timestamps), "keyframes": int(len(result.kf_index)), "seconds": seconds,
+    result, seconds = track_source(source, source.intrinsics_hint, list(args.set), args.backend, args.config)
+    ts, poses = _ground_truth(cfg)
+    est = Trajectory(result.timestamps, result.poses_c2w)
+    ate = evaluate_ate(Trajectory(ts, poses), est)
+    kf = result.kf_index
+    ate_kf = (evaluate_ate(Trajectory(ts[kf], poses[kf]), Trajectory(result.timestamps[kf], result.poses_c2w[kf])).rmse
+              if len(kf) >= 3 else float("nan"))
+    fixed = bool(np.allclose(result.poses_c2w, result.poses_c2w[:1], atol=1e-9))
+    print(json.dumps({"frames": len(result.timestamps), "keyframes": int(len(kf)), "seconds": seconds,
                       "fps": len(result.timestamps) / seconds, "stages": result.timings, "peak_mb": peak_mb(),
-                      "ate_cm": ate * 100}))
+                      "ate_cm": ate.rmse * 100 if not fixed else 0.0, "ate_kf_cm": ate_kf * 100,
+                      "identity": fixed, "initialised": result.initialised}))
 
 
 def _ground_truth(cfg):
@@ -50,41 +66,51 @@ def _ground_truth(cfg):
     return ts, poses
 
 
+def _cell(v: float, fmt: str = "{:.2f}") -> str:
+    return "–" if v != v else fmt.format(v)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--frames", type=int, default=300)
-    ap.add_argument("--size", default="640x480")
+    ap.add_argument("--presets", nargs="+", default=list(PRESETS))
+    ap.add_argument("--frames", type=int, default=0, help="0 = each preset's own length")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1])
+    ap.add_argument("--config", default="default")
+    ap.add_argument("--baseline", action="store_true", help="also run with uncertainty.enable=false")
     ap.add_argument("--backend", default="cpu")
-    ap.add_argument("--memory-minutes", type=float, nargs="*", default=[0.5, 1.0])
+    ap.add_argument("--memory-minutes", type=float, nargs="*", default=[])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
-    ap.add_argument("--preset", default="static", help=argparse.SUPPRESS)
+    ap.add_argument("--preset", default="walk", help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.one:
         one(args)
         return
-    common = ["--size", args.size, "--backend", args.backend] + [x for s in args.set for x in ("--set", s)]
+    common = ["--backend", args.backend, "--config", args.config] + [x for s in args.set for x in ("--set", s)]
     rows = []
-    for preset in ("static", "dynamic"):
+    for preset in args.presets:
         for seed in args.seeds:
-            r = run_case_subprocess("track_bench.py", ["--preset", preset, "--seed", str(seed), "--frames",
-                                                       str(args.frames), *common])
-            st = r["stages"]
-            rows.append([f"{preset} seed {seed}", r["frames"], r["keyframes"], f"{r['fps']:.2f}",
-                         *(f"{st.get(s, 0.0):.1f}" for s in STAGES), f"{r['peak_mb']:.0f}", f"{r['ate_cm']:.2f}"])
-    print(f"\nTracking, {args.size}, {args.frames} frames, backend {args.backend}, uncertainty on")
-    print_table(["sequence", "frames", "keyframes", "frames/s", *[f"{s} [s]" for s in STAGES], "peak MB", "ATE [cm]"],
-                rows)
+            case = ["--preset", preset, "--seed", str(seed), "--frames", str(args.frames), *common]
+            r = run_case_subprocess("track_bench.py", case)
+            off = (run_case_subprocess("track_bench.py", case + ["--set", "uncertainty.enable=false"])["ate_cm"]
+                   if args.baseline else float("nan"))
+            st, n = r["stages"], r["frames"]
+            ate = "identity" if r["identity"] else ("not initialised" if not r["initialised"] else f"{r['ate_cm']:.2f}")
+            rows.append([f"{preset} seed {seed}", n, f"{100 * r['keyframes'] / n:.0f} %", ate,
+                         _cell(r["ate_kf_cm"]), _cell(off), f"{r['fps']:.2f}",
+                         *(f"{1000 * st.get(s, 0.0) / n:.0f}" for s in STAGES), f"{r['peak_mb']:.0f}"])
+    print(f"\nTracking, config {args.config}, backend {args.backend}, known calibration (ms are per input frame)")
+    print_table(["sequence", "frames", "keyframes", "ATE [cm]", "ATE kf [cm]", "ATE off [cm]", "frames/s",
+                 *[f"{s} ms" for s in STAGES], "peak MB"], rows)
     if args.memory_minutes:
         mem_rows = []
         for minutes in args.memory_minutes:
             frames = int(round(minutes * 60 * 30))
-            r = run_case_subprocess("track_bench.py", ["--preset", "dynamic", "--seed", str(args.seeds[0]),
+            r = run_case_subprocess("track_bench.py", ["--preset", "walk", "--seed", str(args.seeds[0]),
                                                        "--frames", str(frames), *common])
             mem_rows.append([f"{minutes:g} min", frames, r["keyframes"], f"{r['peak_mb']:.0f}", f"{r['fps']:.2f}"])
-        print(f"\nPeak memory against video length ({args.size}, 30 frames/s, dynamic preset)")
+        print("\nPeak memory against video length (walk preset, 30 frames/s)")
         print_table(["video", "frames", "keyframes", "peak MB", "frames/s"], mem_rows)
 
 

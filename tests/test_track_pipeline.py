@@ -61,7 +61,7 @@ def test_static_known_calibration_ate_under_1cm(static_seq, static_run):
 
 def test_run_folder_contents(static_run):
     info = json.loads((static_run / "run.json").read_text())
-    assert info["frames"] == 70 and info["keyframes"] >= 12 and info["initialised"] is True
+    assert info["frames"] == 70 and 3 <= info["keyframes"] < 35 and info["initialised"] is True
     assert info["backend"] == "cpu" and info["fps"] > 0 and info["peak_memory_mb"] > 0
     assert {"decode", "flow", "ba", "filler"} <= set(info["seconds_per_stage"])
     with np.load(static_run / "keyframes.npz") as z:
