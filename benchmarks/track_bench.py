@@ -44,14 +44,15 @@ def one(args: argparse.Namespace) -> None:
     result, seconds = track_source(source, source.intrinsics_hint, list(args.set), args.backend, args.config)
     ts, poses = _ground_truth(cfg)
     est = Trajectory(result.timestamps, result.poses_c2w)
-    ate = evaluate_ate(Trajectory(ts, poses), est)
+    fixed = bool(np.allclose(result.poses_c2w, result.poses_c2w[:1], atol=1e-9))
+    still = bool(np.allclose(poses, poses[:1]))  # a fixed camera: ATE is undefined, the answer is "identity"
+    ate = evaluate_ate(Trajectory(ts, poses), est) if not (still or fixed) else None
     kf = result.kf_index
     ate_kf = (evaluate_ate(Trajectory(ts[kf], poses[kf]), Trajectory(result.timestamps[kf], result.poses_c2w[kf])).rmse
-              if len(kf) >= 3 else float("nan"))
-    fixed = bool(np.allclose(result.poses_c2w, result.poses_c2w[:1], atol=1e-9))
+              if len(kf) >= 3 and not still else float("nan"))
     print(json.dumps({"frames": len(result.timestamps), "keyframes": int(len(kf)), "seconds": seconds,
                       "fps": len(result.timestamps) / seconds, "stages": result.timings, "peak_mb": peak_mb(),
-                      "ate_cm": ate.rmse * 100 if not fixed else 0.0, "ate_kf_cm": ate_kf * 100,
+                      "ate_cm": ate.rmse * 100 if ate is not None else float("nan"), "ate_kf_cm": ate_kf * 100,
                       "identity": fixed, "initialised": result.initialised}))
 
 
@@ -96,7 +97,7 @@ def main() -> None:
             off = (run_case_subprocess("track_bench.py", case + ["--set", "uncertainty.enable=false"])["ate_cm"]
                    if args.baseline else float("nan"))
             st, n = r["stages"], r["frames"]
-            ate = "identity" if r["identity"] else ("not initialised" if not r["initialised"] else f"{r['ate_cm']:.2f}")
+            ate = "identity" if r["identity"] else _cell(r["ate_cm"])
             rows.append([f"{preset} seed {seed}", n, f"{100 * r['keyframes'] / n:.0f} %", ate,
                          _cell(r["ate_kf_cm"]), _cell(off), f"{r['fps']:.2f}",
                          *(f"{1000 * st.get(s, 0.0) / n:.0f}" for s in STAGES), f"{r['peak_mb']:.0f}"])

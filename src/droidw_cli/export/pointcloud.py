@@ -17,13 +17,19 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from droidw_cli.ba.uncertainty import weighting_input
 from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics
 from droidw_cli.io.trajectory import atomic_write_bytes
 
 
 @dataclass(frozen=True)
 class CloudParams:
+    """``max_uncertainty`` applies to u as the BA weighting sees it: with ``relative`` (the tracker's
+    default ``uncertainty.mode``), u rescaled so that its median over all keyframes is 0.75, so the
+    threshold sits at the clamp mapping's knee (0.8) whatever level XFeat's u settles at."""
+
     max_uncertainty: float = 0.8
+    relative: bool = True
     min_views: int = 2
     radius: int = 2
     rel_tol: float = 0.05
@@ -96,7 +102,8 @@ def build_cloud(npz: dict, params: CloudParams) -> Cloud:
     images = np.asarray(npz["images"])
     rgb = np.stack([cv2.resize(im, (w, h), interpolation=cv2.INTER_AREA) for im in images])
     times = np.broadcast_to(np.asarray(npz["timestamps"], dtype=np.float64)[:, None, None], (kf, h, w))
-    static = (unc < params.max_uncertainty) & (support >= params.min_views)
+    seen = unc if not (params.relative and "uncertainty" in npz) else weighting_input(torch.from_numpy(unc), "relative").numpy()
+    static = (seen < params.max_uncertainty) & (support >= params.min_views)
     keep = np.zeros(kf, dtype=bool)
     keep[:: max(1, params.stride)] = True
     sel = np.broadcast_to(keep[:, None, None], (kf, h, w))
