@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from droidw_cli import __version__
+from droidw_cli.config import GRID_UNIT
 from droidw_cli.io.calibration import format_calibration
 from droidw_cli.io.trajectory import Trajectory, format_trajectory
 
@@ -55,6 +56,7 @@ def run_info(result, config: dict, backend: str, source: str, peak_mb: float) ->
         "input": source,
         "backend": backend,
         "config": config,
+        "flow_threshold_unit": GRID_UNIT,
         "frames": int(len(result.timestamps)),
         "keyframes": int(len(result.kf_index)),
         "initialised": bool(result.initialised),
