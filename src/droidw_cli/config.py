@@ -119,16 +119,10 @@ class FrontendConfig:
 
 @dataclass(frozen=True)
 class BackendConfig:
-    """Final global BA over all keyframes: every edge the frontend matched, plus proximity edges
-    over the whole keyframe graph (frame distance below ``flow_thresh`` grid px, |i − j| > ``radius``,
-    non-maximum suppression over ``nms`` keyframes), at most ``max_new_edges`` new pairs."""
+    """Final global BA over all keyframes, on every edge the frontend matched."""
 
     enable: bool = True
     iters: int = 12
-    flow_thresh: float = 25.0  # grid px
-    radius: int = 1
-    nms: int = 5
-    max_new_edges: int = 64
 
 
 @dataclass(frozen=True)
