@@ -30,7 +30,7 @@ from droidw_cli.ba.uncertainty import (
 )
 from droidw_cli.geometry.projection import reproject as torch_reproject
 from droidw_backend_cpu.linearize import DEFAULT_CHUNK_BYTES, linearize
-from droidw_backend_cpu.uncertainty import DEFAULT_FEATURE_CHUNK_BYTES, similarity_data_term
+from droidw_backend_cpu.uncertainty import DEFAULT_FEATURE_CHUNK_BYTES, FeatureTable, similarity_data_term
 
 
 class CpuBackend(BABackend):
@@ -48,6 +48,7 @@ class CpuBackend(BABackend):
                  feature_chunk_bytes: int = DEFAULT_FEATURE_CHUNK_BYTES) -> None:
         self.chunk_bytes = int(chunk_bytes)
         self.feature_chunk_bytes = int(feature_chunk_bytes)
+        self._features = FeatureTable()  # channel-last features of the last window, reused while unchanged
 
     @classmethod
     def availability(cls) -> tuple[bool, str]:
@@ -90,7 +91,7 @@ class CpuBackend(BABackend):
         unc = params.uncertainty
         return similarity_data_term(state.poses, state.disps, state.intrinsics, ii, jj, omega, state.features, u,
                                     unc.gamma_data, unc.sim_threshold, params.min_depth, self.feature_chunk_bytes,
-                                    target=target, geo_sigma=unc.geo_sigma)
+                                    target=target, geo_sigma=unc.geo_sigma, table=self._features)
 
     # --------------------------------------------------------------- interface
     def reproject(self, state: BAState, ii: Tensor, jj: Tensor, min_depth: float = 0.05) -> tuple[Tensor, Tensor]:
@@ -109,7 +110,7 @@ class CpuBackend(BABackend):
         unc = params.uncertainty
         if not unc.enable or state.features is None or state.theta is None:
             return None
-        logits = uncertainty_logits(state.features, state.theta, state.map_inputs)
+        logits = uncertainty_logits(self._features.get(state.features)[0], state.theta, state.map_inputs)
         u = uncertainty_from_logits(logits, unc.softplus_offset).reshape(state.num_frames, -1)
         return weighting_input(u, unc.mode)
 
@@ -131,8 +132,8 @@ class CpuBackend(BABackend):
             return UncertaintyStepResult(theta=st.theta.clone(), loss=0.0)
         ii, jj = ed.ii[keep], ed.jj[keep]
         omega, involved = edge_objective_weights(ii, jj, st.num_frames, unc.average_per_keyframe)
-        logits = uncertainty_logits(st.features, st.theta, st.map_inputs)
+        feats = self._features.get(st.features)[0]  # float32 channels-last, cached while the features are unchanged
+        logits = uncertainty_logits(feats, st.theta, st.map_inputs)
         u = uncertainty_from_logits(logits, unc.softplus_offset).reshape(st.num_frames, -1)
         data_grad, data_loss = self._similarity_term(st, ii, jj, ed.target[keep], omega, u, params)
-        return finish_uncertainty_step(st.theta, st.features, logits, data_grad, data_loss, involved, unc,
-                                       st.map_inputs)
+        return finish_uncertainty_step(st.theta, feats, logits, data_grad, data_loss, involved, unc, st.map_inputs)
