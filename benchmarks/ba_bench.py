@@ -4,6 +4,7 @@
     python benchmarks/ba_bench.py                         # table: K = 8 … 256 and the 25-kf/75-edge window
     python benchmarks/ba_bench.py --keyframes 25 --edges 75 --json
     python benchmarks/ba_bench.py --backend cuda --keyframes 256
+    python benchmarks/ba_bench.py --against /path/to/other/checkout --rounds 5   # old vs new, interleaved
 
 Per configuration it reports the median wall time of ``ba_step`` and of
 ``uncertainty_step`` (after two warm-up runs) and the peak extra memory of the
@@ -14,12 +15,20 @@ CUDA it is ``torch.cuda.max_memory_allocated`` minus the allocation before
 the loop.  The table runs every configuration in a fresh subprocess so that
 the peaks do not mix.  Edges connect keyframes up to 2 apart in both
 directions (about 4 per keyframe), features have 64 channels like XFeat.
+
+``--against DIR`` compares with another checkout of droidw (its ``src`` and
+``backends/cpu`` are put first on PYTHONPATH of the baseline's subprocesses):
+for every configuration the two run alternately, ``--rounds`` times each, so
+that both see the same load on a shared machine; the table then has a
+``base`` row (the other checkout) and a row for this checkout, each the median
+over the rounds of the per-round medians, and the speed-up of each step.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -102,6 +111,45 @@ def _row(r: dict) -> str:
             f"{r['ms_uncertainty_step']:>10.1f} {r['peak_mb']:>9.0f}")
 
 
+def _run_child(args, k: int, e: int | None, src_root: str | None = None) -> dict:
+    """One configuration in a fresh subprocess (this checkout, or ``src_root``'s code)."""
+    cmd = [sys.executable, __file__, "--backend", args.backend, "--keyframes", str(k), "--grid", args.grid,
+           "--reps", str(args.reps), "--json"] + (["--edges", str(e)] if e else []) + \
+          (["--threads", str(args.threads)] if args.threads else [])
+    env = None
+    if src_root is not None:
+        root = Path(src_root).resolve()
+        paths = [str(root / "src"), str(root / "backends" / "cpu")] + [os.environ.get("PYTHONPATH", "")]
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(paths).rstrip(os.pathsep))
+    out = subprocess.run(cmd, capture_output=True, text=True, check=True, env=env).stdout.strip().splitlines()[-1]
+    return json.loads(out)
+
+
+def _median_row(runs: list[dict]) -> dict:
+    row = dict(runs[0])
+    for key in ("ms_ba_step", "ms_uncertainty_step", "peak_mb"):
+        row[key] = statistics.median(r[key] for r in runs)
+    return row
+
+
+def _compare(args, configs, header: str) -> list[dict]:
+    """Interleaved rounds of the baseline checkout and this one; prints both rows and the speed-ups."""
+    print(header)
+    rows = []
+    for k, e in configs:
+        base, mine = [], []
+        for _ in range(args.rounds):
+            base.append(_run_child(args, k, e, args.against))
+            mine.append(_run_child(args, k, e))
+        b, m = _median_row(base), _median_row(mine)
+        b["backend"] = "base"
+        print(_row(b))
+        print(_row(m) + f"   x{b['ms_ba_step'] / m['ms_ba_step']:.1f} ba, "
+              f"x{b['ms_uncertainty_step'] / m['ms_uncertainty_step']:.1f} unc", flush=True)
+        rows += [b, m]
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--backend", default="cpu", help="cpu | cuda | auto (default cpu)")
@@ -110,10 +158,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--grid", default="48x64", help="BA grid HxW (default 48x64)")
     ap.add_argument("--reps", type=int, default=5, help="measured repetitions (median reported)")
     ap.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's)")
+    ap.add_argument("--against", metavar="DIR", help="compare with the droidw checkout in DIR (interleaved runs)")
+    ap.add_argument("--rounds", type=int, default=3, help="with --against: alternating runs per side (default 3)")
     ap.add_argument("--json", action="store_true", help="last line: one JSON object")
     args = ap.parse_args(argv)
     h, w = (int(v) for v in args.grid.lower().split("x"))
     header = f"{'back':>5} {'kf':>5} {'edges':>6} {'grid':>6} {'ba ms':>10} {'unc ms':>10} {'peak MB':>9}"
+    if args.against:
+        configs = [(args.keyframes, args.edges)] if args.keyframes is not None else list(TABLE)
+        rows = _compare(args, configs, header)
+        if args.json:
+            print(json.dumps(rows))
+        return 0
     if args.keyframes is not None:
         r = measure(args.backend, args.keyframes, args.edges, (h, w), args.reps, args.threads)
         if args.json:
@@ -125,11 +181,7 @@ def main(argv: list[str] | None = None) -> int:
     print(header)
     rows = []
     for k, e in TABLE:
-        cmd = [sys.executable, __file__, "--backend", args.backend, "--keyframes", str(k), "--grid", args.grid,
-               "--reps", str(args.reps), "--json"] + (["--edges", str(e)] if e else []) + \
-              (["--threads", str(args.threads)] if args.threads else [])
-        out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout.strip().splitlines()[-1]
-        rows.append(json.loads(out))
+        rows.append(_run_child(args, k, e))
         print(_row(rows[-1]), flush=True)
     if args.json:
         print(json.dumps(rows[-1]))
