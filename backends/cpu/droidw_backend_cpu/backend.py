@@ -28,8 +28,8 @@ from droidw_cli.ba.uncertainty import (
     uncertainty_logits,
     weighting_input,
 )
-from droidw_cli.geometry.projection import reproject as torch_reproject
 from droidw_backend_cpu.linearize import DEFAULT_CHUNK_BYTES, linearize
+from droidw_backend_cpu.reproject import ProjectionCache
 from droidw_backend_cpu.uncertainty import DEFAULT_FEATURE_CHUNK_BYTES, FeatureTable, similarity_data_term
 
 
@@ -49,6 +49,7 @@ class CpuBackend(BABackend):
         self.chunk_bytes = int(chunk_bytes)
         self.feature_chunk_bytes = int(feature_chunk_bytes)
         self._features = FeatureTable()  # channel-last features of the last window, reused while unchanged
+        self._projections = ProjectionCache()  # the last reprojection of an edge set, reused while unchanged
 
     @classmethod
     def availability(cls) -> tuple[bool, str]:
@@ -79,19 +80,23 @@ class CpuBackend(BABackend):
 
     # ------------------------------------------------------------------- hooks
     def _project(self, state: BAState, ii: Tensor, jj: Tensor, min_depth: float) -> tuple[Tensor, Tensor]:
-        return torch_reproject(state.poses, state.disps, state.intrinsics, ii, jj, min_depth)
+        proj, _, _ = self._projections.get(state.poses, state.disps, state.intrinsics, ii, jj, min_depth)
+        e = ii.shape[0]
+        h, w = state.grid
+        return proj.coords.permute(0, 2, 1).reshape(e, h, w, 2), proj.valid.reshape(e, h, w)
 
     def _linearize(self, state: BAState, edges: EdgeSet, u_map: Tensor | None, params: BAParams,
                    layout: BlockLayout) -> LinearSystem:
         return linearize(state.poses, state.disps, state.intrinsics, edges.ii, edges.jj, edges.target,
-                         edges.weight, u_map, params, layout, self.chunk_bytes)
+                         edges.weight, u_map, params, layout, self.chunk_bytes, projections=self._projections)
 
     def _similarity_term(self, state: BAState, ii: Tensor, jj: Tensor, target: Tensor, omega: Tensor, u: Tensor,
                          params: BAParams) -> tuple[Tensor, Tensor]:
         unc = params.uncertainty
         return similarity_data_term(state.poses, state.disps, state.intrinsics, ii, jj, omega, state.features, u,
                                     unc.gamma_data, unc.sim_threshold, params.min_depth, self.feature_chunk_bytes,
-                                    target=target, geo_sigma=unc.geo_sigma, table=self._features)
+                                    target=target, geo_sigma=unc.geo_sigma, table=self._features,
+                                    projections=self._projections)
 
     # --------------------------------------------------------------- interface
     def reproject(self, state: BAState, ii: Tensor, jj: Tensor, min_depth: float = 0.05) -> tuple[Tensor, Tensor]:
@@ -130,6 +135,9 @@ class CpuBackend(BABackend):
         keep = similarity_edge_mask(ed.ii, ed.jj, st.keyframe_ids(), unc.min_frame_gap)
         if not bool(keep.any()):
             return UncertaintyStepResult(theta=st.theta.clone(), loss=0.0)
+        if type(self)._similarity_term is CpuBackend._similarity_term:
+            # project all edges once (kept for this state's GN step) and read the E_sim rows from it
+            self._projections.get(st.poses, st.disps, st.intrinsics, ed.ii, ed.jj, params.min_depth)
         ii, jj = ed.ii[keep], ed.jj[keep]
         omega, involved = edge_objective_weights(ii, jj, st.num_frames, unc.average_per_keyframe)
         feats = self._features.get(st.features)[0]  # float32 channels-last, cached while the features are unchanged

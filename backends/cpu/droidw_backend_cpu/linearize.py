@@ -46,8 +46,8 @@ from droidw_cli.ba.params import BAParams
 from droidw_cli.ba.schur import BlockLayout, LinearSystem
 from droidw_cli.ba.uncertainty import weight_factor
 from droidw_cli.geometry.lie import adjoint_matrix
-from droidw_cli.geometry.projection import FOCAL_DOF, POSE_DOF, pixel_grid, relative_poses
-from droidw_cli.geometry.sampling import sample_maps
+from droidw_cli.geometry.projection import FOCAL_DOF, POSE_DOF
+from droidw_backend_cpu.reproject import FrameGeometry, ProjectionCache, Projected, sample_scalar
 
 #: temporaries per chunk of edges (bytes); bounds the memory of the hot path
 DEFAULT_CHUNK_BYTES = 24 * 2**20
@@ -119,10 +119,11 @@ def _focal_rows(a: Tensor, s: Tensor, xy: Tensor, z: Tensor, rot: Tensor, xbar: 
 
 def linearize(poses: Tensor, disps: Tensor, intrinsics: Tensor, ii: Tensor, jj: Tensor, target: Tensor,
               weight: Tensor, u_map: Tensor | None, params: BAParams, layout: BlockLayout | None = None,
-              chunk_bytes: int = DEFAULT_CHUNK_BYTES) -> LinearSystem:
+              chunk_bytes: int = DEFAULT_CHUNK_BYTES, projections: ProjectionCache | None = None) -> LinearSystem:
     """The :class:`LinearSystem` (edge form) of all edges.  u_map: (N, HW) uncertainty or None (unweighted).
 
     ``layout`` is not needed by the edge form (kept for the backends' common hook signature).
+    ``projections``: a cache whose projection of these edges (same state) is used when present.
     """
     n, h, w = disps.shape
     hw = h * w
@@ -132,21 +133,13 @@ def linearize(poses: Tensor, disps: Tensor, intrinsics: Tensor, ii: Tensor, jj: 
     rows = kj  # stored rows per component: 5 pose, nf focal, residual
     depth = not params.motion_only
     dev, dt = disps.device, disps.dtype
-    fx, fy, cx, cy = (float(v) for v in intrinsics.tolist())
-    md = params.min_depth
     unc = params.uncertainty
-
-    gx, gy = pixel_grid(h, w, dev, dt)
-    xbar, ybar = (gx - cx) / fx, (gy - cy) / fy
-    ray = torch.stack((xbar, ybar, torch.ones_like(xbar)))  # (3, HW)
-    focal = torch.tensor([fx, fy], dtype=dt, device=dev).view(1, 2, 1)
-    centre = torch.tensor([cx, cy], dtype=dt, device=dev).view(1, 2, 1)
-    dflat = disps.reshape(n, hw)
-    disp_ok = (dflat > 0) & (dflat * md <= 1.0)  # the depth-in-frame-i half of "valid"
-    disp_min = dflat * md
-    roots = frame_weight_roots(u_map, params, n, hw, dflat)
+    geo = FrameGeometry(poses, disps, intrinsics, params.min_depth)
+    fx, fy, focal = geo.fx, geo.fy, geo.focal
+    roots = frame_weight_roots(u_map, params, n, hw, geo.dflat)
     sel = selection_matrices(nf, dt, dev)
-    rot_all, trans_all = relative_poses(poses, ii, jj)
+    cached = None if projections is None else projections.peek(poses, disps, intrinsics, ii, jj, params.min_depth)
+    rot_all, trans_all = geo.relative(ii, jj) if cached is None else cached[1:]
 
     system = torch.empty(e, kj + 1, kj + 1, device=dev, dtype=dt)
     erows = torch.empty(e, kj, hw, device=dev, dtype=dt) if depth else None
@@ -156,38 +149,36 @@ def linearize(poses: Tensor, disps: Tensor, intrinsics: Tensor, ii: Tensor, jj: 
         ic, jc = ii[sl], jj[sl]
         ec = ic.shape[0]
         rot, trans = rot_all[sl], trans_all[sl]
-        d = dflat.index_select(0, ic)
-        # Eq. 1: (X, Y, Z) = R (x̄, ȳ, 1) + t d; valid: d > 0, 1/d ≥ min_depth, Z/d ≥ min_depth
-        pts = torch.matmul(rot, ray).addcmul_(trans.unsqueeze(2), d.unsqueeze(1))
-        big_z = pts[:, 2]
-        valid = disp_ok.index_select(0, ic).logical_and_(big_z >= disp_min.index_select(0, ic))
-        z = torch.where(valid, big_z, 1.0).reciprocal_()
-        xy = pts[:, :2].mul_(z.unsqueeze(1))  # (ec, 2, HW): x̂, ŷ
-        coords = torch.addcmul(centre, xy, focal)
-        res = torch.sub(target[sl].reshape(ec, hw, 2).transpose(1, 2), coords, out=torch.empty_like(coords))
+        if cached is None:
+            proj = geo.project(ic, rot, trans)
+        else:
+            full = cached[0]
+            proj = Projected(full.xy[sl], full.coords[sl], full.z[sl], full.disp[sl], full.valid[sl])
+        xy, coords, z, d, valid = proj.xy, proj.coords, proj.z, proj.disp, proj.valid
+        a = torch.empty(ec, 2, rows, hw, device=dev, dtype=dt)  # s·[5 pose rows, focal rows, r] of u and v
+        res = torch.sub(target[sl].reshape(ec, hw, 2).transpose(1, 2), coords, out=a[:, :, rows - 1])
         # s = √w (component-wise), zero where invalid
         s = torch.sqrt(weight[sl].reshape(ec, hw, 2).transpose(1, 2), out=torch.empty_like(coords))
         s.mul_(roots.index_select(0, ic).mul_(valid).unsqueeze(1))
         if u_map is not None and unc.bidirectional:
-            uj = sample_maps(u_map.to(dt).reshape(n, h, w), jc, coords[:, 0], coords[:, 1])
+            uj = sample_scalar(u_map.to(dt).reshape(n, h, w), jc, coords[:, 0], coords[:, 1])
             s.mul_(weight_factor(uj, unc.mode).sqrt_().unsqueeze(1))
         sf = s * focal  # s·f
         sz = sf * z.unsqueeze(1)  # s·f·z
-        a = torch.empty(ec, 2, rows, hw, device=dev, dtype=dt)
         torch.mul(sz, d.unsqueeze(1), out=a[:, :, 0])  # s f d z (u and v)
         torch.mul(a[:, :, 0], xy, out=a[:, :, 1])  # s f d z x̂ | s f d z ŷ
         x, y = xy[:, 0], xy[:, 1]
         xyp = x * y
-        sq = torch.mul(xy, xy).add_(1.0)  # 1 + x̂², 1 + ŷ²
+        sq = torch.mul(xy, xy)  # x̂², ŷ²
         torch.mul(sf[:, 0], xyp, out=a[:, 0, 2])
-        torch.mul(sf[:, 1], sq[:, 1], out=a[:, 1, 2])
-        torch.mul(sf[:, 0], sq[:, 0], out=a[:, 0, 3])
+        torch.addcmul(sf[:, 1], sf[:, 1], sq[:, 1], out=a[:, 1, 2])  # s f (1 + ŷ²)
+        torch.addcmul(sf[:, 0], sf[:, 0], sq[:, 0], out=a[:, 0, 3])  # s f (1 + x̂²)
         torch.mul(sf[:, 1], xyp, out=a[:, 1, 3])
         torch.mul(sf[:, 0], y, out=a[:, 0, 4]).neg_()
         torch.mul(sf[:, 1], x, out=a[:, 1, 4])
         if nf:
-            _focal_rows(a, s, xy, z, rot, xbar, ybar, fx, fy, params.optimize_focal)
-        torch.mul(s, res, out=a[:, :, rows - 1])
+            _focal_rows(a, s, xy, z, rot, geo.xbar, geo.ybar, fx, fy, params.optimize_focal)
+        res.mul_(s)  # row r: s·r
         gram = torch.bmm(a.view(ec * 2, rows, hw), a.view(ec * 2, rows, hw).transpose(1, 2))
         system[sl] = torch.matmul(torch.matmul(sel, gram.view(ec, 2, rows, rows)), sel.transpose(1, 2)).sum(1)
         if not depth:

@@ -25,8 +25,9 @@ import torch.nn.functional as tnf
 from torch import Tensor
 
 from droidw_cli.ba.uncertainty import COS_EPS, similarity_score
-from droidw_cli.geometry.projection import project_edges
-from droidw_cli.geometry.sampling import bilinear_corners, inside_image
+from droidw_cli.geometry.sampling import inside_image
+from droidw_cli.geometry.projection import relative_poses
+from droidw_backend_cpu.reproject import FrameGeometry, ProjectionCache, bilinear_rows
 
 #: bytes of gathered features per chunk of edges
 DEFAULT_FEATURE_CHUNK_BYTES = 64 * 2**20
@@ -92,36 +93,41 @@ def similarity_data_term(poses: Tensor, disps: Tensor, intrinsics: Tensor, ii: T
                          omega: Tensor, features: Tensor, u: Tensor, gamma_data: float, sim_threshold: float,
                          min_depth: float, chunk_bytes: int = DEFAULT_FEATURE_CHUNK_BYTES,
                          target: Tensor | None = None, geo_sigma: float = 0.0,
-                         table: FeatureTable | None = None) -> tuple[Tensor, Tensor]:
+                         table: FeatureTable | None = None,
+                         projections: ProjectionCache | None = None) -> tuple[Tensor, Tensor]:
     """(G (N, HW) = ∂(γ_data E_sim)/∂u, γ_data E_sim as a 0-d tensor) over the E_sim edges ii, jj.
 
     features (N, C, H, W) any float dtype; u (N, HW) float32; omega (K,) edge weights;
     target (K, H, W, 2) the correspondence targets of these edges, used by the
-    geometric factor of s when ``geo_sigma`` > 0; ``table``: a cache to reuse.
+    geometric factor of s when ``geo_sigma`` > 0; ``table``, ``projections``: caches to reuse.
     """
     n, c, h, w = features.shape
     hw = h * w
     cl, fnorm = (table or FeatureTable()).get(features)
     flat = rows_of(cl)
-    uflat = u.reshape(-1)
+    ucol = u.reshape(-1, 1).float()
     grad = torch.zeros(n * hw, dtype=torch.float32, device=u.device)
     loss = torch.zeros((), dtype=torch.float32, device=u.device)
-    pix = torch.arange(hw, device=u.device)
     # edges sorted by frame i, so that F_i is broadcast over each run of edges
     order = torch.argsort(ii, stable=True)
     ii, jj, omega = ii[order], jj[order], omega[order]
     target = None if target is None or geo_sigma <= 0 else target[order]
+    cache = projections or ProjectionCache(max_bytes=0)
     size = max(1, chunk_bytes // (_FEATURE_TEMPS * hw * c * 4))
     for s0 in range(0, ii.shape[0], size):
         ic, jc, om = ii[s0:s0 + size], jj[s0:s0 + size], omega[s0:s0 + size]
         ec = ic.shape[0]
-        proj = project_edges(poses, disps, intrinsics, ic, jc, min_depth)
-        x, y = proj.coords[:, 0], proj.coords[:, 1]
+        proj = cache.peek(poses, disps, intrinsics, ic, jc, min_depth)
+        proj = proj[0] if proj is not None else FrameGeometry(poses, disps, intrinsics, min_depth).project(
+            ic, *relative_poses(poses, ic, jc))
+        coords = proj.coords.float()
+        x, y = coords[:, 0], coords[:, 1]
         valid = proj.valid & inside_image(x, y, h, w)
-        idx, wts = bilinear_corners(x, y, h, w, dim=-1)  # (ec, HW, 4)
+        idx, wts = bilinear_rows(x, y, h, w)  # (ec, HW, 4)
         idx += (jc * hw).view(-1, 1, 1)  # flat into (N·HW)
-        fij = tnf.embedding_bag(idx.view(-1, 4), flat, per_sample_weights=wts.view(-1, 4).to(flat.dtype),
-                                mode="sum").view(ec, hw, c)
+        idx, wts = idx.view(-1, 4), wts.view(-1, 4)
+        fij = tnf.embedding_bag(idx, flat, per_sample_weights=wts, mode="sum").view(ec, hw, c)
+        uij = tnf.embedding_bag(idx, ucol, per_sample_weights=wts, mode="sum").view(ec, hw)
         nij = torch.linalg.vector_norm(fij, dim=2)
         dot = torch.empty(ec, hw, dtype=torch.float32, device=u.device)
         for frame, a, b in _frame_runs(ic):
@@ -132,12 +138,9 @@ def similarity_data_term(poses: Tensor, disps: Tensor, intrinsics: Tensor, ii: T
             tc = target[s0:s0 + size].reshape(-1, hw, 2)
             residual = torch.hypot(tc[..., 0] - x, tc[..., 1] - y)
         sim = similarity_score(cos, sim_threshold, residual, geo_sigma)
-        iflat = ic.unsqueeze(1) * hw + pix  # (ec, HW)
-        ui = uflat[iflat]
-        uij = (uflat[idx] * wts).sum(2)
-        t = gamma_data * om.unsqueeze(1) * valid * (1.0 - sim) / (ui * uij)
+        ui = u.index_select(0, ic)
+        t = (1.0 - sim).mul_(valid).mul_((gamma_data * om).unsqueeze(1)).div_(ui * uij)
         loss += t.sum()
-        grad.index_add_(0, iflat.reshape(-1), (-t / ui).reshape(-1))
-        gij = -t / uij
-        grad.index_add_(0, idx.reshape(-1), (wts * gij.unsqueeze(2)).reshape(-1))
+        grad.view(n, hw).index_add_(0, ic, -t / ui)
+        grad.index_add_(0, idx.view(-1), wts.mul_((-t / uij).view(-1, 1)).view(-1))
     return grad.reshape(n, hw), loss
