@@ -137,3 +137,22 @@ def test_evidence_maps_match_their_definition(problem):
         doubt = 1.0 - edges.weight[out][..., 0].double().mean(0)
         assert torch.allclose(ev[f, 0].double(), residual, atol=1e-5)
         assert torch.allclose(ev[f, 1].double(), doubt, atol=1e-6)
+
+
+def test_sampling_helpers_match_the_reference_sampler():
+    from droidw_cli.geometry.sampling import bilinear_corners, sample_maps
+    from droidw_backend_cpu.reproject import bilinear_rows, sample_scalar
+
+    g = torch.Generator().manual_seed(0)
+    n, h, w = 4, 6, 9
+    maps = torch.rand(n, h, w, generator=g)
+    frames = torch.tensor([3, 0, 2])
+    x = torch.rand(3, 50, generator=g) * (w + 2) - 1
+    y = torch.rand(3, 50, generator=g) * (h + 2) - 1
+    x[0, :4] = torch.tensor([0.0, w - 1.0, -0.5, w - 1.5])
+    y[0, :4] = torch.tensor([h - 1.0, 0.0, h + 3.0, h - 1.0])
+    ref = sample_maps(maps, frames, x, y)
+    assert torch.allclose(sample_scalar(maps, frames, x, y), ref, atol=1e-6)
+    idx, wts = bilinear_rows(x, y, h, w)
+    idx0, wts0 = bilinear_corners(x, y, h, w, dim=-1)
+    assert torch.equal(idx, idx0) and torch.equal(wts, wts0)
