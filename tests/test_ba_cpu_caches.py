@@ -156,3 +156,17 @@ def test_sampling_helpers_match_the_reference_sampler():
     idx, wts = bilinear_rows(x, y, h, w)
     idx0, wts0 = bilinear_corners(x, y, h, w, dim=-1)
     assert torch.equal(idx, idx0) and torch.equal(wts, wts0)
+
+
+def test_edge_values_are_checked_again_after_an_in_place_change(problem):
+    state, edges = problem
+    backend = CpuBackend()
+    target = edges.target.clone()
+    mine = type(edges)(edges.ii, edges.jj, target, edges.weight)
+    backend.ba_step(state, mine, BAParams())
+    backend.ba_step(state, mine, BAParams())  # the same edges: their values are not checked twice
+    target[0, 1, 2, 0] = float("nan")
+    with pytest.raises(ValueError, match="target contains NaN"):
+        backend.ba_step(state, mine, BAParams())
+    with pytest.raises(ValueError, match="weight must be >= 0"):
+        backend.uncertainty_step(state, type(edges)(edges.ii, edges.jj, edges.target, -edges.weight), BAParams())

@@ -24,7 +24,7 @@ import torch
 import torch.nn.functional as tnf
 from torch import Tensor
 
-from droidw_cli.ba.uncertainty import COS_EPS, similarity_score
+from droidw_cli.ba.uncertainty import COS_EPS, channel_dot, similarity_score
 from droidw_cli.geometry.sampling import inside_image
 from droidw_cli.geometry.projection import relative_poses
 from droidw_backend_cpu.reproject import FrameGeometry, ProjectionCache, bilinear_rows
@@ -50,6 +50,8 @@ class FeatureTable:
     def __init__(self) -> None:
         self._key: tuple | None = None
         self._value: tuple[Tensor, Tensor] | None = None
+        self._dot_key: tuple | None = None
+        self._dot: Tensor | None = None
 
     def get(self, features: Tensor) -> tuple[Tensor, Tensor]:
         """(channels-last float32 features (N, C, H, W), norms ‖F‖ (N, HW) float32)."""
@@ -62,15 +64,41 @@ class FeatureTable:
         else:
             src = features.reshape(n, c, h * w)
             rows = torch.empty(n, h * w, c, dtype=torch.float32, device=features.device)
-            for f in range(n):  # one frame at a time: a cache-sized transpose, much faster than one big copy
-                rows[f] = src[f].t()
+            direct = features.dtype == torch.float32 and features.is_contiguous()
+            frame = None if direct else torch.empty(c, h * w, dtype=torch.float32, device=features.device)
+            for f in range(n):  # one frame at a time: cache-sized, and torch's blocked 2-D transpose applies
+                if direct:
+                    rows[f].copy_(src[f].t())
+                else:  # convert (and make contiguous) first: a converting transpose is several times slower
+                    frame.copy_(src[f])
+                    rows[f].copy_(frame.t())
             cl = rows.view(n, h, w, c).permute(0, 3, 1, 2)
         norms = torch.linalg.vector_norm(rows_of(cl), dim=1).reshape(n, h * w)
         self._key, self._value = key, (cl, norms)
         return self._value
 
+    def logits(self, features: Tensor, theta: Tensor, map_inputs: Tensor | None = None) -> Tensor:
+        """a = θ[:C]·F + θ[C:-1]·X + θ[-1] (N, H, W), as :func:`droidw_cli.ba.uncertainty.uncertainty_logits`.
+
+        θ[:C]·F, one pass over all the features, is kept for the last θ[:C]: in
+        the tracker the GN step and the next uncertainty step use the same θ.
+        """
+        cl, _ = self.get(features)
+        n, c, h, w = cl.shape
+        theta = theta.to(device=cl.device, dtype=torch.float32)
+        key = self._dot_key
+        if key is not None and key[0] is cl and key[1] == cl._version and torch.equal(key[2], theta[:c]):
+            a = self._dot
+        else:
+            a = channel_dot(cl, theta[:c])
+            self._dot_key, self._dot = (cl, cl._version, theta[:c].clone()), a
+        if map_inputs is not None:
+            a = a + channel_dot(map_inputs, theta[c:-1])
+        return (a + theta[-1]).reshape(n, h, w)
+
     def clear(self) -> None:
         self._key = self._value = None
+        self._dot_key = self._dot = None
 
 
 def rows_of(cl: Tensor) -> Tensor:
