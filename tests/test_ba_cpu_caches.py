@@ -170,3 +170,17 @@ def test_edge_values_are_checked_again_after_an_in_place_change(problem):
         backend.ba_step(state, mine, BAParams())
     with pytest.raises(ValueError, match="weight must be >= 0"):
         backend.uncertainty_step(state, type(edges)(edges.ii, edges.jj, edges.target, -edges.weight), BAParams())
+
+
+def test_inference_mode_tensors_work_without_reuse(problem):
+    """Tensors made in inference mode keep no version counter: nothing is reused, results are unchanged."""
+    state, edges = problem
+    ref = CpuBackend().ba_step(state, edges, TRACKER.__class__())
+    with torch.inference_mode():
+        st = state.with_(**{k: v.clone() for k, v in state.__dict__.items() if isinstance(v, torch.Tensor)})
+        ed = type(edges)(edges.ii.clone(), edges.jj.clone(), edges.target.clone(), edges.weight.clone())
+    backend = CpuBackend()
+    backend.reproject(st, ed.ii, ed.jj)
+    backend.uncertainty_step(st, ed, BAParams())
+    res = backend.ba_step(st, ed, BAParams())
+    assert torch.equal(res.state.poses, ref.state.poses) and torch.equal(res.state.disps, ref.state.disps)

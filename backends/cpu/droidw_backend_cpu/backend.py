@@ -9,6 +9,15 @@ by default one thread per core); the backend never changes it.
 The three hooks ``_project``, ``_linearize`` and ``_similarity_term`` are the
 hot paths; the CUDA backend subclasses this class and replaces them with
 kernels, so the assembly, the Schur solve and the uncertainty update are shared.
+
+**Work kept between calls** (a tracker iteration calls ``reproject`` for the
+evidence maps, ``uncertainty_step`` and ``ba_step`` on one state): the last
+reprojection (:class:`~droidw_backend_cpu.reproject.ProjectionCache`), the
+features as float32 channels-last with θ[:C]·F for the last θ
+(:class:`~droidw_backend_cpu.uncertainty.FeatureTable`), and which edge
+tensors passed the value checks.  Each is keyed on the very tensor objects and
+their version counters (bumped by every in-place write), so a reuse can never
+see changed inputs; results are the same as from a fresh backend.
 """
 
 from __future__ import annotations
@@ -28,7 +37,7 @@ from droidw_cli.ba.uncertainty import (
     weighting_input,
 )
 from droidw_backend_cpu.linearize import DEFAULT_CHUNK_BYTES, linearize
-from droidw_backend_cpu.reproject import ProjectionCache
+from droidw_backend_cpu.reproject import ProjectionCache, version
 from droidw_backend_cpu.uncertainty import DEFAULT_FEATURE_CHUNK_BYTES, FeatureTable, similarity_data_term
 
 
@@ -81,9 +90,10 @@ class CpuBackend(BABackend):
     def _validate(self, state: BAState, edges: EdgeSet, need_features: bool = False) -> None:
         """``validate_inputs``; the value checks of target and weight only once per (unchanged) edge set."""
         tensors = (edges.target, edges.weight)
-        stamps = tuple(t._version for t in tensors)
+        stamps = tuple(version(t) for t in tensors)
         known = self._checked_edges
-        seen = known is not None and all(a is b for a, b in zip(known[0], tensors)) and known[1] == stamps
+        seen = (known is not None and None not in stamps and all(a is b for a, b in zip(known[0], tensors))
+                and known[1] == stamps)
         validate_inputs(state, edges, need_features, check_edge_values=not seen)
         self._checked_edges = (tensors, stamps)
 

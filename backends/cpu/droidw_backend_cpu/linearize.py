@@ -23,16 +23,20 @@ one batched Gram A_c A_cᵀ gives, after the constant signed selections P_c,
 
     Σ_c P_c (A_c A_cᵀ) P_cᵀ = [[H_j, g_j], [g_jᵀ, Σ w r²]].
 
-Stored magnitudes are s·f·[d z, x̂ d z, x̂ŷ, 1 + x̂², −ŷ] for u and s·f·[d z, ŷ d z, 1 + ŷ², x̂ŷ, x̂]
-for v (pose-j rows 0, 2, 3, 4, 5 and 1, 2, 3, 4, 5); the signs (+, −, −, +, +) of
-both go into P.  With b_c = s_c ∂p_c/∂d the per-pixel terms are C = Σ_c b_c²,
-w = Σ_c b_c (s_c r_c) and erows = Σ_c (s_c J_c) b_c, all elementwise.
+The stored rows are s·f·[d z, x̂ d z, x̂ŷ, 1 + x̂², −ŷ] for u and
+s·f·[d z, ŷ d z, 1 + ŷ², x̂ŷ, x̂] for v (pose-j rows 0, 2, 3, 4, 5 and
+1, 2, 3, 4, 5); the remaining signs (+, −, −, +, +) of both go into P.  With
+b_c = s_c ∂p_c/∂d the per-pixel terms are C = Σ_c b_c², w = Σ_c b_c (s_c r_c)
+and erows = Σ_c (s_c J_c) b_c, all elementwise.
 
 Only the pose-j (and focal) rows are built; the pose-i rows follow from the
 adjoint (:func:`expand_to_both_poses`).  Edges go in chunks whose temporaries stay
 below ``chunk_bytes``; ``erows`` (E, 6 + nf, HW) is the one output that grows with
 the pixels, and :func:`droidw_cli.ba.schur.solve_step` takes it as it is (one E
-block per edge, the "edge form").
+block per edge, the "edge form").  The reprojection comes from a
+:class:`~droidw_backend_cpu.reproject.ProjectionCache` when it holds these edges
+for this state (the tracker's evidence maps or uncertainty step made it), else
+it is computed per chunk.
 """
 
 from __future__ import annotations
@@ -51,7 +55,7 @@ from droidw_backend_cpu.reproject import FrameGeometry, ProjectionCache, Project
 
 #: temporaries per chunk of edges (bytes); bounds the memory of the hot path
 DEFAULT_CHUNK_BYTES = 24 * 2**20
-#: (HW,) tensors of the working dtype alive per edge of a chunk (A: 2·(7 + nf), the rest ≈ 30)
+#: (HW,) tensors of the working dtype alive per edge of a chunk (A: 2·(6 + nf), the rest about 30)
 _TEMPS_PER_EDGE = 44
 #: pose-j row of each stored Jacobian row (rows 0-4) of the u and v components, and its sign
 _U_ROWS = (0, 2, 3, 4, 5)

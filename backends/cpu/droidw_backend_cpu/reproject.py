@@ -124,9 +124,24 @@ def sample_scalar(maps: Tensor, frames: Tensor, x: Tensor, y: Tensor) -> Tensor:
 DEFAULT_CACHE_BYTES = 64 * 2**20
 
 
+def version(t: Tensor) -> int | None:
+    """t's version counter (bumped by every in-place write), or None where torch keeps none
+    (tensors made in inference mode): such tensors are never reused."""
+    try:
+        return t._version
+    except RuntimeError:
+        return None
+
+
 def _stamp(t: Tensor) -> tuple:
     """What identifies a tensor's current contents cheaply: the object, its version counter."""
-    return (id(t), t._version)
+    return (id(t), version(t))
+
+
+def _stamps(*tensors: Tensor) -> tuple | None:
+    """The stamps of tensors, or None when one of them has no version counter."""
+    out = tuple(_stamp(t) for t in tensors)
+    return None if any(v is None for _, v in out) else out
 
 
 class ProjectionCache:
@@ -154,11 +169,9 @@ class ProjectionCache:
         e = self._entry
         if e is None or e["min_depth"] != min_depth:
             return None
-        if e["inputs"] != tuple(_stamp(t) for t in (poses, disps, intrinsics)):
-            return None
         if e["held"][0] is not poses or e["held"][1] is not disps or e["held"][2] is not intrinsics:
             return None
-        if e["outputs"] != tuple(_stamp(t) for t in e["proj"]):
+        if e["inputs"] != _stamps(poses, disps, intrinsics) or e["outputs"] != _stamps(*e["proj"]):
             return None
         return e
 
@@ -168,7 +181,7 @@ class ProjectionCache:
         e = self._valid_for(poses, disps, intrinsics, min_depth)
         if e is None:
             return None
-        if e["ii"] is ii and e["jj"] is jj and e["edges"] == (_stamp(ii), _stamp(jj)):
+        if e["ii"] is ii and e["jj"] is jj and e["edges"] == _stamps(ii, jj):
             return self._rows(e, None, ii)
         if ii.numel() and (int(ii.max()) >= e["n"] or int(jj.max()) >= e["n"]):
             return None
@@ -187,7 +200,8 @@ class ProjectionCache:
         rot, trans = geo.relative(ii, jj)
         proj = geo.project(ii, rot, trans)
         hw = disps.shape[1] * disps.shape[2]
-        if ii.shape[0] * hw * (5 * proj.xy.element_size() + 1) <= self.max_bytes:
+        small = ii.shape[0] * hw * (5 * proj.xy.element_size() + 1) <= self.max_bytes
+        if small and _stamps(poses, disps, intrinsics, ii, jj) is not None:
             self._store(poses, disps, intrinsics, ii, jj, min_depth, proj, rot, trans)
         return proj, rot, trans
 
@@ -197,9 +211,9 @@ class ProjectionCache:
         lookup[ii * n + jj] = torch.arange(ii.shape[0], device=ii.device)
         kept = (proj.xy, proj.coords, proj.z, proj.valid)
         self._entry = {
-            "held": (poses, disps, intrinsics), "inputs": tuple(_stamp(t) for t in (poses, disps, intrinsics)),
-            "min_depth": min_depth, "ii": ii, "jj": jj, "edges": (_stamp(ii), _stamp(jj)), "n": n,
-            "lookup": lookup, "proj": kept, "outputs": tuple(_stamp(t) for t in kept),
+            "held": (poses, disps, intrinsics), "inputs": _stamps(poses, disps, intrinsics),
+            "min_depth": min_depth, "ii": ii, "jj": jj, "edges": _stamps(ii, jj), "n": n,
+            "lookup": lookup, "proj": kept, "outputs": _stamps(*kept),
             "rot": rot, "trans": trans, "dflat": disps.reshape(n, -1),
         }
 

@@ -27,7 +27,7 @@ from torch import Tensor
 from droidw_cli.ba.uncertainty import COS_EPS, channel_dot, similarity_score
 from droidw_cli.geometry.sampling import inside_image
 from droidw_cli.geometry.projection import relative_poses
-from droidw_backend_cpu.reproject import FrameGeometry, ProjectionCache, bilinear_rows
+from droidw_backend_cpu.reproject import FrameGeometry, ProjectionCache, bilinear_rows, version
 
 #: bytes of gathered features per chunk of edges
 DEFAULT_FEATURE_CHUNK_BYTES = 64 * 2**20
@@ -55,8 +55,8 @@ class FeatureTable:
 
     def get(self, features: Tensor) -> tuple[Tensor, Tensor]:
         """(channels-last float32 features (N, C, H, W), norms ‖F‖ (N, HW) float32)."""
-        key = (features, features._version, tuple(features.shape), features.dtype, features.device)
-        if self._key is not None and self._key[0] is features and self._key[1:] == key[1:]:
+        key = (features, version(features), tuple(features.shape), features.dtype, features.device)
+        if self._key is not None and self._key[0] is features and self._key[1:] == key[1:] and key[1] is not None:
             return self._value
         n, c, h, w = features.shape
         if features.dtype == torch.float32 and features.is_contiguous(memory_format=torch.channels_last):
@@ -86,12 +86,13 @@ class FeatureTable:
         cl, _ = self.get(features)
         n, c, h, w = cl.shape
         theta = theta.to(device=cl.device, dtype=torch.float32)
-        key = self._dot_key
-        if key is not None and key[0] is cl and key[1] == cl._version and torch.equal(key[2], theta[:c]):
+        key, stamp = self._dot_key, version(cl)
+        same = key is not None and key[0] is cl and stamp is not None and key[1] == stamp
+        if same and torch.equal(key[2], theta[:c]):
             a = self._dot
         else:
             a = channel_dot(cl, theta[:c])
-            self._dot_key, self._dot = (cl, cl._version, theta[:c].clone()), a
+            self._dot_key, self._dot = (cl, stamp, theta[:c].clone()), a
         if map_inputs is not None:
             a = a + channel_dot(map_inputs, theta[c:-1])
         return (a + theta[-1]).reshape(n, h, w)
