@@ -140,7 +140,7 @@ def similarity_data_term(poses: Tensor, disps: Tensor, intrinsics: Tensor, ii: T
     # edges sorted by frame i, so that F_i is broadcast over each run of edges
     order = torch.argsort(ii, stable=True)
     ii, jj, omega = ii[order], jj[order], omega[order]
-    target = None if target is None or geo_sigma <= 0 else target[order]
+    target = None if target is None or geo_sigma <= 0 else target.index_select(0, order)
     cache = projections or ProjectionCache(max_bytes=0)
     size = max(1, chunk_bytes // (_FEATURE_TEMPS * hw * c * 4))
     for s0 in range(0, ii.shape[0], size):
@@ -161,7 +161,7 @@ def similarity_data_term(poses: Tensor, disps: Tensor, intrinsics: Tensor, ii: T
         dot = torch.empty(ec, hw, dtype=torch.float32, device=u.device)
         for frame, a, b in _frame_runs(ic):
             torch.sum(fij[a:b].mul_(flat[frame * hw:(frame + 1) * hw]), dim=2, out=dot[a:b])
-        cos = dot.div_((nij.mul_(fnorm[ic])).clamp_min_(COS_EPS))
+        cos = dot.div_((nij.mul_(fnorm.index_select(0, ic))).clamp_min_(COS_EPS))
         residual = None
         if target is not None:
             tc = target[s0:s0 + size].reshape(-1, hw, 2)

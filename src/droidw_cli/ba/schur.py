@@ -192,28 +192,37 @@ def _pad_blocks(t: Tensor, nb: int, dims: int) -> Tensor:
 
 def _edge_form_schur(s_blocks: Tensor, rhs: Tensor, lin: LinearSystem, ii: Tensor, nodes: Tensor, cinv: Tensor,
                      wvec: Tensor, active: Tensor, slot: Tensor) -> None:
-    """Subtract Σ T_k Γ_kl T_lᵀ from S and Σ T_k e_k C⁻¹ w from rhs (edge form, module docstring)."""
+    """Subtract Σ T_k Γ_kl T_lᵀ from S and Σ T_k e_k C⁻¹ w from rhs (edge form, module docstring).
+
+    Per group of frames with D out-edges: a = [e_k C^-1/2 (k ∈ out(n)); w_n C^-1/2] (one more
+    row per frame, and a zero row to keep the row count even, which MKL's small
+    Grams run much faster on), so one batched Gram a aᵀ holds both Γ and Σ_p e_k C⁻¹ w.
+    """
     e, kj, hw = lin.erows.shape
     nb = nodes.shape[1]
     order, groups = edge_groups(ii, cinv.shape[0])
-    frame = ii[order]
     root = cinv.sqrt()
-    scaled = lin.erows.index_select(0, order).mul_(root.index_select(0, frame).unsqueeze(1))  # e_k C^-1/2
-    tmat = lin.tmat.index_select(0, order).double()
-    onodes = nodes.index_select(0, order)
-    # Σ_p e_k C⁻¹ w (E, kj); an elementwise product and sum (a batched matrix-vector bmm is far slower on CPU)
-    ew = torch.mul(scaled, (wvec * root).index_select(0, frame).unsqueeze(1)).sum(2).double()
-    tew = _pad_blocks(torch.bmm(tmat, ew.unsqueeze(2)).squeeze(2), nb, 1)  # T_k Σ_p e_k C⁻¹ w (E, 6·nb)
-    rhs.index_add_(0, slot[onodes.reshape(-1)], -tew.reshape(-1, POSE_DOF))
+    wroot = wvec * root
     for d, start, count in groups:
-        if d == 0:
-            continue
-        a = scaled[start:start + count * d].reshape(count, d * kj, hw)
-        gram = torch.bmm(a, a.transpose(1, 2)).double().reshape(count, d, kj, d, kj).transpose(2, 3)
-        t = tmat[start:start + count * d].reshape(count, d, 1, -1, kj)
-        prod = _pad_blocks(torch.matmul(torch.matmul(t, gram), t.transpose(1, 2).transpose(3, 4)), nb, 2)
+        sel = order[start:start + count * d]
+        frames = ii[sel[::d]]  # (count,) the depth frame of each group member
+        m = d * kj
+        rows = m + 1 + (m + 1) % 2
+        a = torch.empty(count, rows, hw, dtype=lin.erows.dtype, device=lin.erows.device)
+        # e_k C^-1/2; index_select, not x[sel]: advanced indexing gathers element by element, far slower on CPU
+        torch.mul(lin.erows.index_select(0, sel).view(count, d, kj, hw),
+                  root.index_select(0, frames).view(count, 1, 1, hw), out=a[:, :m].view(count, d, kj, hw))
+        a[:, m] = wroot.index_select(0, frames)  # w C^-1/2
+        a[:, m + 1:] = 0.0
+        gram = torch.bmm(a, a.transpose(1, 2)).double()
+        g = gram[:, :m, :m].reshape(count, d, kj, d, kj).transpose(2, 3)  # Γ_kl
+        ew = gram[:, :m, m].reshape(count, d, kj, 1)  # Σ_p e_k C⁻¹ w
+        t = lin.tmat[sel].double().reshape(count, d, 1, -1, kj)
+        tew = _pad_blocks(torch.matmul(t[:, :, 0], ew).reshape(count * d, -1), nb, 1)  # T_k Σ_p e_k C⁻¹ w
+        nd = nodes[sel].reshape(count, d, nb)
+        rhs.index_add_(0, slot[nd.reshape(-1)], -tew.reshape(-1, POSE_DOF))
+        prod = _pad_blocks(torch.matmul(torch.matmul(t, g), t.transpose(1, 2).transpose(3, 4)), nb, 2)
         prod = prod.reshape(count, d, d, nb, POSE_DOF, nb, POSE_DOF).transpose(4, 5)  # (c, k, l, a, b, 6, 6)
-        nd = onodes[start:start + count * d].reshape(count, d, nb)
         shape = (count, d, d, nb, nb)
         _scatter_blocks(s_blocks, nd[:, :, None, :, None].expand(shape), nd[:, None, :, None, :].expand(shape),
                         -prod, active)
@@ -339,7 +348,7 @@ def solve_step(poses: Tensor, disps: Tensor, intrinsics: Tensor, depth_prior: Te
             e, k = lin.grad.shape
             xk = node_dx[edge_nodes(ii, jj, layout)].reshape(e, -1)[:, :k]
             delta = torch.bmm(lin.tmat.transpose(1, 2), xk.unsqueeze(2).to(lin.tmat.dtype))  # (E, 6+nf, 1)
-            etx = torch.mul(lin.erows, delta).sum(1)  # (E, HW)
+            etx = torch.bmm(delta.transpose(1, 2), lin.erows).squeeze(1)  # (E, HW)
             back = torch.zeros(n, hw, dtype=etx.dtype, device=etx.device).index_add_(0, ii, etx)
         else:
             etx = torch.bmm(node_dx[layout.block_node].unsqueeze(1), lin.eblocks).squeeze(1)  # (Q, HW)
