@@ -29,8 +29,9 @@ from droidw_cli.geometry.sampling import inside_image
 from droidw_cli.geometry.projection import relative_poses
 from droidw_backend_cpu.reproject import FrameGeometry, ProjectionCache, bilinear_rows, version
 
-#: bytes of gathered features per chunk of edges
-DEFAULT_FEATURE_CHUNK_BYTES = 64 * 2**20
+#: bytes of gathered features per chunk of edges (the blended F_ij stays under glibc's 32 MB
+#: mmap ceiling, so its memory is reused between chunks instead of being mapped afresh)
+DEFAULT_FEATURE_CHUNK_BYTES = 32 * 2**20
 #: (HW, C) float32 tensors alive per edge of a chunk (the blended F_ij and the product with F_i)
 _FEATURE_TEMPS = 2
 

@@ -167,6 +167,10 @@ def _scatter_blocks(dest: Tensor, node_a: Tensor, node_b: Tensor, blocks: Tensor
     dest.index_add_(0, (a * na + b)[keep], blocks.reshape(-1, POSE_DOF, POSE_DOF)[keep].to(dest.dtype))
 
 
+#: rows of one batch of frames of the edge-form Schur Grams (bytes): small enough to stay in cache
+SCHUR_BATCH_BYTES = 8 * 2**20
+
+
 def edge_groups(ii: Tensor, num_frames: int) -> tuple[Tensor, list[tuple[int, int, int]]]:
     """(order (E,), groups): edges sorted by (out-degree D of their frame ii, ii), stably.
 
@@ -203,7 +207,12 @@ def _edge_form_schur(s_blocks: Tensor, rhs: Tensor, lin: LinearSystem, ii: Tenso
     order, groups = edge_groups(ii, cinv.shape[0])
     root = cinv.sqrt()
     wroot = wvec * root
+    batches = []  # (D, first edge, frames): each group in batches of frames whose rows fit SCHUR_BATCH_BYTES
     for d, start, count in groups:
+        per_frame = (d * kj + 2) * hw * lin.erows.element_size()
+        step = max(1, SCHUR_BATCH_BYTES // per_frame)
+        batches += [(d, start + f * d, min(step, count - f)) for f in range(0, count, step)]
+    for d, start, count in batches:
         sel = order[start:start + count * d]
         frames = ii[sel[::d]]  # (count,) the depth frame of each group member
         m = d * kj
