@@ -159,12 +159,16 @@ def depth_system(lin: LinearSystem, disps: Tensor, depth_prior: Tensor | None,
     return 1.0 / c, w, prior_cost
 
 
-def _scatter_blocks(dest: Tensor, node_a: Tensor, node_b: Tensor, blocks: Tensor, active: Tensor) -> None:
-    """dest (A·A, 6, 6) += blocks (..., 6, 6) at (active[a], active[b]), skipping inactive nodes."""
+def _block_index(node_a: Tensor, node_b: Tensor, active: Tensor, num_active: int) -> Tensor:
+    """Flat slot a·A + b of the node pairs (active[a], active[b]); A·A (a sink) where either is inactive."""
     a, b = active[node_a].reshape(-1), active[node_b].reshape(-1)
-    keep = (a >= 0) & (b >= 0)
-    na = int(round(dest.shape[0] ** 0.5))
-    dest.index_add_(0, (a * na + b)[keep], blocks.reshape(-1, POSE_DOF, POSE_DOF)[keep].to(dest.dtype))
+    return torch.where((a >= 0) & (b >= 0), a * num_active + b, num_active * num_active)
+
+
+def _scatter_blocks(dest: Tensor, node_a: Tensor, node_b: Tensor, blocks: Tensor, active: Tensor) -> None:
+    """dest (A·A + 1, 6, 6) += blocks (..., 6, 6) at (active[a], active[b]); inactive pairs go to the sink."""
+    na = int(round((dest.shape[0] - 1) ** 0.5))
+    dest.index_add_(0, _block_index(node_a, node_b, active, na), blocks.reshape(-1, POSE_DOF, POSE_DOF).to(dest.dtype))
 
 
 #: rows of one batch of frames of the edge-form Schur Grams (bytes): small enough to stay in cache
@@ -212,6 +216,8 @@ def _edge_form_schur(s_blocks: Tensor, rhs: Tensor, lin: LinearSystem, ii: Tenso
         per_frame = (d * kj + 2) * hw * lin.erows.element_size()
         step = max(1, SCHUR_BATCH_BYTES // per_frame)
         batches += [(d, start + f * d, min(step, count - f)) for f in range(0, count, step)]
+    num_active = int(round((s_blocks.shape[0] - 1) ** 0.5))
+    s_at, s_add, rhs_at, rhs_add = [], [], [], []
     for d, start, count in batches:
         sel = order[start:start + count * d]
         frames = ii[sel[::d]]  # (count,) the depth frame of each group member
@@ -229,12 +235,17 @@ def _edge_form_schur(s_blocks: Tensor, rhs: Tensor, lin: LinearSystem, ii: Tenso
         t = lin.tmat[sel].double().reshape(count, d, 1, -1, kj)
         tew = _pad_blocks(torch.matmul(t[:, :, 0], ew).reshape(count * d, -1), nb, 1)  # T_k Σ_p e_k C⁻¹ w
         nd = nodes[sel].reshape(count, d, nb)
-        rhs.index_add_(0, slot[nd.reshape(-1)], -tew.reshape(-1, POSE_DOF))
+        rhs_at.append(slot[nd.reshape(-1)])
+        rhs_add.append(-tew.reshape(-1, POSE_DOF))
         prod = _pad_blocks(torch.matmul(torch.matmul(t, g), t.transpose(1, 2).transpose(3, 4)), nb, 2)
         prod = prod.reshape(count, d, d, nb, POSE_DOF, nb, POSE_DOF).transpose(4, 5)  # (c, k, l, a, b, 6, 6)
         shape = (count, d, d, nb, nb)
-        _scatter_blocks(s_blocks, nd[:, :, None, :, None].expand(shape), nd[:, None, :, None, :].expand(shape),
-                        -prod, active)
+        s_at.append(_block_index(nd[:, :, None, :, None].expand(shape), nd[:, None, :, None, :].expand(shape),
+                                 active, num_active))
+        s_add.append(-prod.reshape(-1, POSE_DOF, POSE_DOF))
+    # one scatter for all batches (each index_add_ call has a fixed cost that small windows feel)
+    s_blocks.index_add_(0, torch.cat(s_at), torch.cat(s_add))
+    rhs.index_add_(0, torch.cat(rhs_at), torch.cat(rhs_add))
 
 
 def _block_form_schur(s_blocks: Tensor, rhs: Tensor, lin: LinearSystem, layout: BlockLayout, cinv: Tensor,
@@ -268,7 +279,7 @@ def reduced_system(lin: LinearSystem, layout: BlockLayout, ii: Tensor, jj: Tenso
     hess = _pad_blocks(lin.hess, nb, 2)  # pad the focal rows to a full 6-row block
     grad = _pad_blocks(lin.grad, nb, 1)
     nodes = edge_nodes(ii, jj, layout)  # (E, nb)
-    s_blocks = torch.zeros(num_active * num_active, POSE_DOF, POSE_DOF, dtype=torch.float64, device=dev)
+    s_blocks = torch.zeros(num_active * num_active + 1, POSE_DOF, POSE_DOF, dtype=torch.float64, device=dev)  # + sink
     rhs = torch.zeros(num_active + 1, POSE_DOF, dtype=torch.float64, device=dev)  # last slot = inactive sink
     hb = hess.reshape(e, nb, POSE_DOF, nb, POSE_DOF).permute(0, 1, 3, 2, 4)
     _scatter_blocks(s_blocks, nodes.unsqueeze(2).expand(e, nb, nb), nodes.unsqueeze(1).expand(e, nb, nb), hb, active)
@@ -278,7 +289,7 @@ def reduced_system(lin: LinearSystem, layout: BlockLayout, ii: Tensor, jj: Tenso
         _edge_form_schur(s_blocks, rhs, lin, ii, nodes, cinv, wvec, active, slot)
     elif lin.eblocks is not None:
         _block_form_schur(s_blocks, rhs, lin, layout, cinv, wvec, active, slot)
-    s = s_blocks.reshape(num_active, num_active, POSE_DOF, POSE_DOF).permute(0, 2, 1, 3)
+    s = s_blocks[:-1].reshape(num_active, num_active, POSE_DOF, POSE_DOF).permute(0, 2, 1, 3)
     return s.reshape(num_active * POSE_DOF, num_active * POSE_DOF), rhs[:num_active].reshape(-1)
 
 
