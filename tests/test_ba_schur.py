@@ -9,7 +9,7 @@ from droidw_cli.ba.params import BAParams, UncertaintyParams
 from droidw_cli.ba.schur import LinearSystem, build_layout, solve_step
 from droidw_cli.geometry.lie import pose_compose, se3_exp
 from droidw_cli.geometry.projection import FOCAL_DOF, edge_jacobians, project_edges
-from droidw_backend_cpu.linearize import linearize
+from droidw_backend_cpu.linearize import linearize, scatter_eblocks
 
 H, W = 5, 7
 
@@ -103,6 +103,25 @@ def test_block_sparse_step_equals_dense_reference(focal, t0):
         assert torch.allclose(new_intr[1] / new_intr[0], intr[1] / intr[0])
     assert torch.equal(new_intr[2:], intr[2:])
     assert cost > 0
+
+
+@pytest.mark.parametrize("focal", ["none", "xy"])
+def test_block_form_equals_edge_form(focal):
+    """E handed over in block form (as the CUDA backend does) gives the edge form's step."""
+    poses, disps, intr, ii, jj, target, weight, prior = _problem(3)
+    params = BAParams(t0=1, optimize_focal=focal, gamma_depth=0.01, min_disp=1e-6,
+                      uncertainty=UncertaintyParams(enable=False))
+    layout = build_layout(ii, jj, 5, focal)
+    lin = linearize(poses, disps, intr, ii, jj, target, weight, None, params, layout)
+    assert lin.erows is not None and lin.eblocks is None
+    eblocks = torch.zeros(layout.num_blocks, 6, H * W, dtype=torch.float64)
+    scatter_eblocks(eblocks, layout.edge_blocks, lin.tmat, lin.erows)
+    block = LinearSystem(lin.hess, lin.grad, eblocks, lin.cdiag, lin.wvec, lin.cost)
+    edge_step = solve_step(poses, disps, intr, prior, ii, jj, lin, layout, params)
+    block_step = solve_step(poses, disps, intr, prior, ii, jj, block, layout, params)
+    for a, b in zip(edge_step[:3], block_step[:3]):
+        assert torch.allclose(a, b, atol=1e-10)
+    assert edge_step[3] == pytest.approx(block_step[3])
 
 
 def test_motion_only_keeps_disparities_and_uses_pose_block():

@@ -75,13 +75,16 @@ def _all_finite(t: Tensor) -> bool:
     return bool(torch.isfinite(t).all())
 
 
-def validate_inputs(state: BAState, edges: EdgeSet, need_features: bool = False) -> None:
+def validate_inputs(state: BAState, edges: EdgeSet, need_features: bool = False,
+                    check_edge_values: bool = True) -> None:
     """Refuse malformed BA input with a clear ``ValueError``.
 
     Checks: non-empty edges, integer indices in range and no self-edges,
     matching shapes (grid at least 2 × 2), finite values, non-negative weights,
     and, when ``need_features`` (or when features are given), the features, θ and
-    frame ids.
+    frame ids.  ``check_edge_values=False`` skips the value checks of the edges'
+    target and weight (finite, weight ≥ 0; full passes over E·HW·2 values) for a
+    caller that has checked these very tensors already.
     """
     n = state.num_frames
     if state.poses.ndim != 2 or state.poses.shape[1] != 7:
@@ -111,11 +114,11 @@ def validate_inputs(state: BAState, edges: EdgeSet, need_features: bool = False)
         raise ValueError(f"edge index out of range: indices span [{lo}, {hi}] but there are {n} frames")
     if bool((edges.ii == edges.jj).any()):
         raise ValueError("an edge connects a frame to itself (ii == jj)")
-    for name, t in (("target", edges.target), ("weight", edges.weight), ("poses", state.poses),
-                    ("disps", state.disps), ("intrinsics", state.intrinsics)):
+    values = (("target", edges.target), ("weight", edges.weight)) if check_edge_values else ()
+    for name, t in values + (("poses", state.poses), ("disps", state.disps), ("intrinsics", state.intrinsics)):
         if not _all_finite(t):
             raise ValueError(f"{name} contains NaN or Inf")
-    if float(edges.weight.amin()) < 0:
+    if check_edge_values and float(edges.weight.amin()) < 0:
         raise ValueError("weight must be >= 0")
     if not bool((state.intrinsics[:2] > 0).all()):
         raise ValueError(f"focal lengths must be positive, got {state.intrinsics[:2].tolist()}")

@@ -60,7 +60,7 @@ COS_EPS = 1e-8
 
 
 def map_input_matrix(features: Tensor, map_inputs: Tensor | None = None) -> Tensor:
-    """The affine map's per-pixel inputs [F; X] as (N, C + M, HW) float32."""
+    """The affine map's per-pixel inputs [F; X] as (N, C + M, HW) float32 (a copy when X is given)."""
     n, c, h, w = features.shape
     flat = features.reshape(n, c, h * w).float()
     if map_inputs is None:
@@ -68,12 +68,56 @@ def map_input_matrix(features: Tensor, map_inputs: Tensor | None = None) -> Tens
     return torch.cat((flat, map_inputs.reshape(n, -1, h * w).to(flat)), 1)
 
 
+def _channels_last_rows(x: Tensor) -> Tensor | None:
+    """x (N, C, H, W) as an (N·H·W, C) view when its memory is channels-last, else None."""
+    n, c, h, w = x.shape
+    if c > 1 and x.is_contiguous(memory_format=torch.channels_last) and not x.is_contiguous():
+        return x.permute(0, 2, 3, 1).reshape(n * h * w, c)
+    return None
+
+
+def channel_dot(x: Tensor, vec: Tensor) -> Tensor:
+    """Σ_c vec[c] x[n, c, p] → (N, HW) float32, for x (N, C, H, W) in either memory layout.
+
+    One matrix-vector product over the pixels (no copy of x when it is float32).
+    """
+    n, c, h, w = x.shape
+    vec = vec.to(device=x.device, dtype=torch.float32)
+    rows = _channels_last_rows(x)
+    if rows is not None:
+        return torch.matmul(rows.float(), vec).reshape(n, h * w)
+    return torch.matmul(vec, x.reshape(n, c, h * w).float())
+
+
+def pixel_sum(x: Tensor, weights: Tensor) -> Tensor:
+    """Σ_{n,p} weights[n, p] x[n, :, p] → (C,) float32, for x (N, C, H, W) in either memory layout.
+
+    Channels-last: one vector-matrix product; channels-first: one matrix-vector
+    product per frame (a batched matrix-vector ``bmm`` is several times slower on CPU).
+    """
+    n, c, h, w = x.shape
+    weights = weights.reshape(n, h * w).float()
+    rows = _channels_last_rows(x)
+    if rows is not None:
+        return torch.matmul(weights.reshape(-1), rows.float())
+    flat = x.reshape(n, c, h * w)
+    out = torch.zeros(c, dtype=torch.float32, device=x.device)
+    for f in range(n):
+        out.addmv_(flat[f].float(), weights[f])
+    return out
+
+
 def uncertainty_logits(features: Tensor, theta: Tensor, map_inputs: Tensor | None = None) -> Tensor:
-    """a = θ[:-1]·[F; X] + θ[-1]: features (N, C, H, W) (+ map inputs (N, M, H, W)) → (N, H, W)."""
-    n, _, h, w = features.shape
+    """a = θ[:-1]·[F; X] + θ[-1]: features (N, C, H, W) (+ map inputs (N, M, H, W)) → (N, H, W).
+
+    The features may be channels-first or channels-last in memory.
+    """
+    n, c, h, w = features.shape
     theta = theta.to(device=features.device, dtype=torch.float32)
-    flat = map_input_matrix(features, map_inputs)
-    return (torch.matmul(theta[:-1], flat) + theta[-1]).reshape(n, h, w)
+    a = channel_dot(features, theta[:c])
+    if map_inputs is not None:
+        a = a + channel_dot(map_inputs, theta[c:-1])
+    return (a + theta[-1]).reshape(n, h, w)
 
 
 def uncertainty_from_logits(logits: Tensor, offset: float) -> Tensor:
@@ -151,10 +195,12 @@ def similarity_score(cos: Tensor, threshold: float, residual: Tensor | None = No
 
 def theta_gradient(grad_u: Tensor, slope: Tensor, features: Tensor, map_inputs: Tensor | None = None) -> Tensor:
     """g = Σ G · du/da · [F; X; 1] for G, du/da (N, HW) → (C + M + 1,)."""
-    n = features.shape[0]
-    ga = (grad_u * slope).reshape(n, 1, -1)
-    gf = torch.bmm(map_input_matrix(features, map_inputs), ga.transpose(1, 2)).sum(0).squeeze(-1)
-    return torch.cat((gf, ga.sum().reshape(1)))
+    ga = grad_u * slope
+    parts = [pixel_sum(features, ga)]
+    if map_inputs is not None:
+        parts.append(pixel_sum(map_inputs, ga))
+    parts.append(ga.sum().reshape(1))
+    return torch.cat(parts)
 
 
 def finish_uncertainty_step(state_theta: Tensor, features: Tensor, logits: Tensor, data_grad: Tensor,

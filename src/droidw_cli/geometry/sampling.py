@@ -22,10 +22,11 @@ def inside_image(x: Tensor, y: Tensor, h: int, w: int) -> Tensor:
     return (x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)
 
 
-def bilinear_corners(x: Tensor, y: Tensor, h: int, w: int) -> tuple[Tensor, Tensor]:
+def bilinear_corners(x: Tensor, y: Tensor, h: int, w: int, dim: int = 0) -> tuple[Tensor, Tensor]:
     """Flat corner indices ``y·W + x`` (4, ...) long and weights (4, ...) (sum 1).
 
-    Corner order: (x0, y0), (x0+1, y0), (x0, y0+1), (x0+1, y0+1).
+    Corner order: (x0, y0), (x0+1, y0), (x0, y0+1), (x0+1, y0+1), stacked along
+    ``dim`` (``dim=-1`` gives (..., 4), one row of four corners per point).
     """
     if h < 2 or w < 2:
         raise ValueError(f"bilinear sampling needs a grid of at least 2 × 2, got {h} × {w}")
@@ -36,8 +37,8 @@ def bilinear_corners(x: Tensor, y: Tensor, h: int, w: int) -> tuple[Tensor, Tens
     ax, ay = xc - x0, yc - y0
     bx, by = 1.0 - ax, 1.0 - ay
     base = y0.long() * w + x0.long()
-    idx = torch.stack((base, base + 1, base + w, base + w + 1))
-    wts = torch.stack((bx * by, ax * by, bx * ay, ax * ay))
+    idx = torch.stack((base, base + 1, base + w, base + w + 1), dim=dim)
+    wts = torch.stack((bx * by, ax * by, bx * ay, ax * ay), dim=dim)
     return idx, wts
 
 

@@ -32,16 +32,27 @@ WIDE_GAP = 2
 
 
 def evidence_maps(backend: BABackend, state: BAState, edges: EdgeSet, min_depth: float) -> Tensor:
-    """(N, 2, H, W) evidence of every frame from its outgoing edges (0 where it has none)."""
+    """(N, 2, H, W) evidence of every frame from its outgoing edges (0 where it has none).
+
+    One reprojection of the edges, then per-frame sums (``index_add_`` over the
+    edges' frames ii): residual = log(1 + Σ r·v / max(Σ v, 1)) with v = valid ∧
+    |i − j| ≥ WIDE_GAP, doubt = 1 − Σ w_x / max(#edges, 1) where the frame has
+    edges.  r = ‖p*_ij − p_ij‖ is computed per component pair with ``hypot``
+    (a norm over a last axis of length 2 is very slow on CPU).
+    """
     n = state.num_frames
     h, w = state.grid
-    coords, valid = backend.reproject(state, edges.ii, edges.jj, min_depth)
-    v = valid.float() * ((edges.ii - edges.jj).abs() >= WIDE_GAP).float()[:, None, None]
-    r = torch.linalg.vector_norm(edges.target - coords, dim=-1) * v
-    count = torch.zeros(n, h, w).index_add_(0, edges.ii, v).clamp_min(1.0)
-    residual = torch.log1p(torch.zeros(n, h, w).index_add_(0, edges.ii, r) / count)
-    edges_per_pixel = torch.zeros(n, h, w).index_add_(0, edges.ii, torch.ones_like(v)).clamp_min(1.0)
-    confidence = torch.zeros(n, h, w).index_add_(0, edges.ii, edges.weight[..., 0]) / edges_per_pixel
-    has_edges = torch.zeros(n).index_add_(0, edges.ii, torch.ones(edges.num_edges)) > 0
-    doubt = torch.where(has_edges[:, None, None], 1.0 - confidence, torch.zeros_like(confidence))
+    ii = edges.ii.long()
+    coords, valid = backend.reproject(state, ii, edges.jj, min_depth)
+    coords, valid = coords.cpu(), valid.cpu()
+    target = edges.target.to(coords)
+    wide = (ii - edges.jj.long()).abs() >= WIDE_GAP
+    v = (valid & wide[:, None, None]).float()  # (valid may be a view of a cached projection: no in-place)
+    r = torch.hypot(target[..., 0] - coords[..., 0], target[..., 1] - coords[..., 1]).mul_(v)
+    count = torch.zeros(n, h, w).index_add_(0, ii, v).clamp_min_(1.0)
+    residual = torch.log1p(torch.zeros(n, h, w).index_add_(0, ii, r).div_(count))
+    per_frame = torch.bincount(ii, minlength=n).float()  # edges per frame (the same for all its pixels)
+    confidence = torch.zeros(n, h, w).index_add_(0, ii, edges.weight[..., 0].to(coords))
+    confidence.div_(per_frame.clamp_min(1.0)[:, None, None])
+    doubt = torch.where((per_frame > 0)[:, None, None], 1.0 - confidence, torch.zeros_like(confidence))
     return torch.stack([residual, doubt], 1)

@@ -31,8 +31,13 @@ class SharedState:
 
 
 def window_state(buffer: KeyframeBuffer, lo: int, hi: int, shared: SharedState, with_features: bool) -> BAState:
-    """A :class:`BAState` for keyframes [lo, hi) of the buffer (copies)."""
-    feats = buffer.features[lo:hi].float() if (with_features and buffer.features is not None) else None
+    """A :class:`BAState` for keyframes [lo, hi) of the buffer.
+
+    Poses, disparities and the prior are copies; the features are the buffer's
+    own (float16) slice, which the backends only read (they convert it to float32
+    as they need, once per window: no float32 copy here).
+    """
+    feats = buffer.features[lo:hi] if (with_features and buffer.features is not None) else None
     return BAState(
         poses=buffer.poses[lo:hi].clone(),
         disps=buffer.disps[lo:hi].clone(),
