@@ -127,14 +127,16 @@ class BackendConfig:
 
 @dataclass(frozen=True)
 class FillerConfig:
-    """Poses for non-keyframes: SE(3) interpolation then motion-only BA against the two keyframes.
+    """Poses for non-keyframes, online, from the motion filter's flow (:mod:`droidw_cli.slam.filler`).
 
-    ``preset``: the DIS preset of the filler's flow (it is started from the
-    induced flow, so a cheaper preset than the frontend's suffices).
+    A gap's frames are solved once its anchor keyframe is ``lag`` keyframes
+    old, by ``iters`` motion-only IRLS iterations with a Cauchy weight of scale
+    ``robust_sigma`` grid px.
     """
 
     iters: int = 3
-    preset: str = "medium"
+    lag: int = 2
+    robust_sigma: float = 0.25  # grid px
     uncertainty: bool = True  # weight the keyframes' pixels by their uncertainty
 
 

@@ -1,8 +1,10 @@
 """``droidw track``'s pipeline: frames in, a pose for every frame out.
 
-First pass: motion filter → keyframes → frontend (initialisation, window BA
-with uncertainty).  Then the global BA.  Second pass over the re-iterable
-source: the trajectory filler gives every frame a pose.
+One pass: motion filter → keyframes → frontend (initialisation, window BA
+with uncertainty); every other frame goes to the trajectory filler with the
+motion filter's flow from the newest keyframe, and gets its pose relative to
+that keyframe once the keyframe has settled.  Then the global BA, and the
+filler composes every frame's pose with its keyframe's final pose.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from droidw_cli.slam.backend import global_ba
 from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.frontend import Frontend
 from droidw_cli.slam.motion_filter import MotionFilter
-from droidw_cli.ba.uncertainty import uncertainty_map, weight_factor, weighting_input
+from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.timing import StageTimer, Timed
 
@@ -101,14 +103,6 @@ class Tracker:
         self.progress = progress
         self.timer = StageTimer()
 
-    def _filler_correspondence(self, frontend_corr):
-        """The filler's correspondence source: the frontend's, at the filler's DIS preset where it has one."""
-        inner = self.correspondence
-        if not hasattr(inner, "cfg") or getattr(inner.cfg, "preset", None) in (None, self.cfg.filler.preset):
-            return frontend_corr
-        other = type(inner)(dataclasses.replace(inner.cfg, preset=self.cfg.filler.preset))
-        return Timed(other, self.timer, "flow", ("match", "match_pair"))
-
     def run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
         cfg, timer = self.cfg, self.timer
         t_start = time.perf_counter()
@@ -129,6 +123,8 @@ class Tracker:
         channels = self.features.channels if self.features is not None else 0
         fe = Frontend(cfg, params, backend, corr, grid, k8, channels)
         mfilter = MotionFilter(cfg.motion_filter)
+        filler = TrajectoryFiller(fe, cfg.filler)
+        fe.on_remove = filler.keyframe_removed
         frames: list[tuple[int, float]] = []
         s = cfg.io.thumbnail_scale
 
@@ -158,6 +154,11 @@ class Tracker:
                     thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
                     fe.add_keyframe(frame.index, frame.timestamp, image, thumb, feats, prior)
                     mfilter.accept(image)
+                    with timer("filler"):
+                        filler.update()
+                else:
+                    with timer("filler"):
+                        filler.add_frame(frame.index, frame.timestamp, fe.buffer.frame_index[-1], image)
                 bar.update(1)
                 bar.set_postfix(kf=len(fe.buffer), refresh=False)
             bar.close()
@@ -175,24 +176,8 @@ class Tracker:
 
             evidence = fe.evidence()
             unc = _keyframe_uncertainty(fe, evidence)
-            # a keyframe pixel is only as good an anchor as its depth: weight it by the confidence its
-            # edges gave it in BA (zero where the epipolar masks removed a mover) and by its uncertainty
-            factors = _confidence(fe)
-            if unc is not None and cfg.filler.uncertainty:
-                mode = cfg.uncertainty.mode
-                factors = factors * weight_factor(weighting_input(unc, mode), mode)
-            filler = TrajectoryFiller(fe, cfg.filler.iters, factors, self._filler_correspondence(corr))
             with timer("filler"):
-                if fe.initialised:
-                    bar = tqdm(total=len(frames), desc="fill", unit="frame", disable=not self.progress, dynamic_ncols=True)
-                    for frame in source:
-                        image, _ = preparer(frame.image, None)
-                        filler.push(frame.index, frame.timestamp, image)
-                        bar.update(1)
-                    bar.close()
-                    poses_w2c = filler.finish()
-                else:
-                    poses_w2c = {}
+                poses_w2c = filler.finish()
             collected += [str(w.message) for w in caught if not issubclass(w.category, DeprecationWarning)]
 
         ident = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
