@@ -36,6 +36,7 @@ class IOConfig:
     max_frames: int = 0  # 0 = all
     thumbnail_scale: int = 4  # keyframe thumbnails at 1/thumbnail_scale of the working size
     use_depth: bool = False  # RGB-D: sensor depth feeds the depth-prior term (rgbd.yaml)
+    prefetch: int = 4  # frames decoded and prepared ahead on a background thread (0: none)
 
 
 @dataclass(frozen=True)

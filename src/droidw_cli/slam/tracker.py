@@ -25,6 +25,7 @@ from droidw_cli.errors import InputError
 from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics, unscale_intrinsics
 from droidw_cli.io.calibration import Calibration
 from droidw_cli.io.frames import FrameSource
+from droidw_cli.io.prefetch import prefetched
 from droidw_cli.io.prepare import FramePreparer
 from droidw_cli.slam.backend import global_ba
 from droidw_cli.slam.filler import TrajectoryFiller
@@ -93,7 +94,7 @@ def _keyframe_uncertainty(frontend: Frontend, evidence: torch.Tensor | None) -> 
 
 
 class Tracker:
-    """Runs the two passes of the pipeline over one frame source."""
+    """Runs the pipeline over one frame source."""
 
     def __init__(self, cfg: TrackConfig, backend: BABackend, correspondence, features=None, progress: bool = True):
         self.cfg = cfg
@@ -102,6 +103,40 @@ class Tracker:
         self.features = features if cfg.uncertainty.enable else None
         self.progress = progress
         self.timer = StageTimer()
+
+    def _first_pass(self, items, fe: Frontend, mfilter: MotionFilter, filler: TrajectoryFiller,
+                    frames: list[tuple[int, float]], bar, grid: tuple[int, int], hw: tuple[int, int]) -> None:
+        """Motion filter, keyframes and the frontend; every other frame goes to the filler."""
+        cfg, timer, s = self.cfg, self.timer, self.cfg.io.thumbnail_scale
+        while True:
+            with timer("decode"):  # the wait for the prefetch thread
+                item = next(items, None)
+            if item is None:
+                return
+            frame, image, depth = item
+            frames.append((frame.index, frame.timestamp))
+            with timer("motion_filter"):
+                is_kf, _ = mfilter.check(image, fe.initialised)
+            if is_kf:
+                feats = None
+                if self.features is not None:
+                    with timer("features"):
+                        x = torch.from_numpy(image).permute(2, 0, 1)[None].float() / 255.0
+                        feats = self.features.extract(x)[0]
+                prior = None
+                if cfg.io.use_depth and depth is not None:
+                    d8 = cv2.resize(depth, (grid[1], grid[0]), interpolation=cv2.INTER_NEAREST)
+                    prior = torch.from_numpy(np.where(d8 > 0.1, 1.0 / np.maximum(d8, 1e-6), 0.0).astype(np.float32))
+                thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
+                fe.add_keyframe(frame.index, frame.timestamp, image, thumb, feats, prior)
+                mfilter.accept(image)
+                with timer("filler"):
+                    filler.update()
+            else:
+                with timer("filler"):
+                    filler.add_frame(frame.index, frame.timestamp, fe.buffer.frame_index[-1], image)
+            bar.update(1)
+            bar.set_postfix(kf=len(fe.buffer), refresh=False)
 
     def run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
         cfg, timer = self.cfg, self.timer
@@ -126,41 +161,20 @@ class Tracker:
         filler = TrajectoryFiller(fe, cfg.filler)
         fe.on_remove = filler.keyframe_removed
         frames: list[tuple[int, float]] = []
-        s = cfg.io.thumbnail_scale
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             bar = tqdm(total=len(source), desc="track", unit="frame", disable=not self.progress, dynamic_ncols=True)
-            it = iter(source)
-            while True:
-                with timer("decode"):
-                    frame = next(it, None)
-                    if frame is None:
-                        break
-                    image, depth = preparer(frame.image, frame.depth)
-                frames.append((frame.index, frame.timestamp))
-                with timer("motion_filter"):
-                    is_kf, _ = mfilter.check(image, fe.initialised)
-                if is_kf:
-                    feats = None
-                    if self.features is not None:
-                        with timer("features"):
-                            x = torch.from_numpy(image).permute(2, 0, 1)[None].float() / 255.0
-                            feats = self.features.extract(x)[0]
-                    prior = None
-                    if cfg.io.use_depth and depth is not None:
-                        d8 = cv2.resize(depth, (grid[1], grid[0]), interpolation=cv2.INTER_NEAREST)
-                        prior = torch.from_numpy(np.where(d8 > 0.1, 1.0 / np.maximum(d8, 1e-6), 0.0).astype(np.float32))
-                    thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
-                    fe.add_keyframe(frame.index, frame.timestamp, image, thumb, feats, prior)
-                    mfilter.accept(image)
-                    with timer("filler"):
-                        filler.update()
-                else:
-                    with timer("filler"):
-                        filler.add_frame(frame.index, frame.timestamp, fe.buffer.frame_index[-1], image)
-                bar.update(1)
-                bar.set_postfix(kf=len(fe.buffer), refresh=False)
+            restore = getattr(source, "load_depth", None)
+            if restore is not None:
+                source.load_depth = cfg.io.use_depth
+            items = prefetched(((f, *preparer(f.image, f.depth)) for f in source), cfg.io.prefetch)
+            try:
+                self._first_pass(items, fe, mfilter, filler, frames, bar, grid, hw)
+            finally:
+                items.close()  # stops the prefetch thread, also after an error
+                if restore is not None:
+                    source.load_depth = restore
             bar.close()
 
             if not frames:
