@@ -10,6 +10,7 @@ filler composes every frame's pose with its keyframe's final pose.
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -93,6 +94,14 @@ def _keyframe_uncertainty(frontend: Frontend, evidence: torch.Tensor | None) -> 
     return uncertainty_map(buf.features[:len(buf)].float(), theta, frontend.params.uncertainty.softplus_offset, evidence)
 
 
+def torch_threads(requested: int) -> int:
+    """Torch threads for ``threads`` = requested (0: usable cores − 1, clamped to 1 … 8)."""
+    if requested > 0:
+        return requested
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(cores - 1, 8))
+
+
 class Tracker:
     """Runs the pipeline over one frame source."""
 
@@ -139,6 +148,15 @@ class Tracker:
             bar.set_postfix(kf=len(fe.buffer), refresh=False)
 
     def run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
+        """Track ``source``; ``calibration`` None estimates the focal length (``--calib auto``)."""
+        before = torch.get_num_threads()
+        torch.set_num_threads(torch_threads(self.cfg.threads))
+        try:
+            return self._run(source, calibration)
+        finally:
+            torch.set_num_threads(before)
+
+    def _run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
         cfg, timer = self.cfg, self.timer
         t_start = time.perf_counter()
         collected: list[str] = []
