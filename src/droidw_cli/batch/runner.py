@@ -61,7 +61,10 @@ def run_batch(rows: list[Row], opts: BatchOptions, progress: bool = False,
               report: Callable[[dict], None] = lambda rec: None) -> list[dict]:
     """Run (or skip) every row; returns the records in manifest order, summary written."""
     out = opts.out
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"cannot create the output folder {out}: {exc.strerror or exc}") from None
     remove_partials(out)  # left by a run that was killed
     records: dict[str, dict] = {}
     todo = []
@@ -151,6 +154,7 @@ def _run_ray(todo: list[Row], opts: BatchOptions, records: dict, progress: bool,
                     except ray.exceptions.RayError as exc:  # the worker died (memory, a crash): record it
                         rec = {"name": row.name, "input": row.input, "gt": row.gt, "status": "failed",
                                "error": f"Ray task failed: {error_text(exc)}"}
+                        remove_partials(opts.out, {row.name})
                     records[row.name] = rec
                     report(rec)
                     bar.update(1)

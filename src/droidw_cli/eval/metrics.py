@@ -16,6 +16,7 @@ fewer than :data:`MIN_MATCHES` pairs, identical or collinear positions.
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -129,8 +130,10 @@ def evo_trajectory(traj: Trajectory, index: np.ndarray | None = None, name: str 
     from evo.core.trajectory import PoseTrajectory3D
 
     t = traj if index is None else traj.subset(index)
-    return PoseTrajectory3D(poses_se3=list(np.asarray(t.poses, dtype=np.float64)),
-                            timestamps=np.asarray(t.timestamps, dtype=np.float64).copy(), name=name)
+    out = PoseTrajectory3D(poses_se3=list(np.asarray(t.poses, dtype=np.float64)),
+                           timestamps=np.asarray(t.timestamps, dtype=np.float64).copy())
+    out.name = name  # evo ≥ 1.3x labels results by it (older ones take names as ape() arguments)
+    return out
 
 
 def evaluate_ate(gt: Trajectory, est: Trajectory, align: str = "sim3", max_diff: float = 0.02, *,
@@ -153,8 +156,10 @@ def evaluate_ate(gt: Trajectory, est: Trajectory, align: str = "sim3", max_diff:
     if align != "none":
         check_alignable(est.positions[assoc.est_index], gt_pos)
     ref_name, est_name = names
+    extra = {"ref_name": ref_name, "est_name": est_name} if "est_name" in inspect.signature(ape).parameters else {}
     result = ape(evo_trajectory(gt, assoc.gt_index, ref_name), evo_trajectory(est, assoc.est_index, est_name),
-                 metrics.PoseRelation.translation_part, align=align != "none", correct_scale=align == "sim3")
+                 metrics.PoseRelation.translation_part, align=align != "none", correct_scale=align == "sim3",
+                 **extra)
     sim3 = (Sim3.from_matrix(result.np_arrays["alignment_transformation_sim3"]) if align != "none"
             else Sim3.identity())
     if align != "sim3":
@@ -164,7 +169,8 @@ def evaluate_ate(gt: Trajectory, est: Trajectory, align: str = "sim3", max_diff:
     return AteResult(
         rmse=s.rmse, mean=s.mean, median=s.median, max=s.max, std=s.std, min=s.min, matches=s.count,
         scale=float(sim3.scale), rotation=sim3.rotation, translation=sim3.translation,
-        positions=np.asarray(result.trajectories[est_name].positions_xyz, dtype=np.float64), gt_positions=gt_pos,
+        positions=np.asarray(result.trajectories[result.info["est_name"]].positions_xyz, dtype=np.float64),
+        gt_positions=gt_pos,
         errors=errors, gt_index=assoc.gt_index, est_index=assoc.est_index, align=align, evo_result=result,
     )
 
