@@ -69,7 +69,7 @@ def run_sequence(row: dict, out_dir: str, threads: int = 1, backend: str = "auto
     try:
         tmp.mkdir(parents=True)
         try:
-            _track_and_eval(row, tmp, backend, record)
+            _track_and_eval(row, tmp, backend, record, int(threads))
             record["status"] = "ok"
         except Exception as exc:  # noqa: BLE001 - a failing sequence is recorded, the batch goes on
             record["error"] = error_text(exc)
@@ -82,14 +82,14 @@ def run_sequence(row: dict, out_dir: str, threads: int = 1, backend: str = "auto
     return record
 
 
-def _track_and_eval(row: dict, folder: Path, backend: str, record: dict) -> None:
+def _track_and_eval(row: dict, folder: Path, backend: str, record: dict, threads: int) -> None:
     from droidw_cli.commands.track import run_track
 
     inp = Path(row["input"])
     if not inp.exists():
         raise UserError(f"input not found: {inp}")
     result, _ = run_track(inp, folder, row.get("calib"), backend, row.get("config") or "default",
-                          tuple(row.get("overrides") or ()), progress=False, echo=lambda *a, **k: None)
+                          (f"threads={max(1, threads)}", *(row.get("overrides") or ())), progress=False, echo=lambda *a, **k: None)
     record.update(frames=int(len(result.timestamps)), keyframes=int(len(result.kf_index)),
                   fps=round(float(result.fps), 3), warnings=len(result.warnings))
     if row.get("gt"):
