@@ -132,12 +132,14 @@ class FillerConfig:
 
     A gap's frames are solved once its anchor keyframe is ``lag`` keyframes
     old, by ``iters`` motion-only IRLS iterations with a Cauchy weight of scale
-    ``robust_sigma`` grid px.
+    ``robust_sigma`` grid px; a refined pose is kept only where it brings the
+    robust cost below ``min_gain`` of the interpolation's.
     """
 
     iters: int = 3
     lag: int = 2
     robust_sigma: float = 0.25  # grid px
+    min_gain: float = 0.5  # a refined pose must bring the robust cost below this share of the interpolation's
     uncertainty: bool = True  # weight the keyframes' pixels by their uncertainty
 
 

@@ -19,7 +19,14 @@ for all frames of the gap at once:
    the keyframe) and a Cauchy weight of its residual, re-evaluated every
    iteration (IRLS), which keeps movers that the uncertainty missed from
    pulling the pose:
-   w = w_k · 1 / (1 + (r / σ)²),  r = ‖p*_kt − Π(G_t G_k⁻¹ Π⁻¹(p, d_k))‖ in grid px.
+   w = w_k · 1 / (1 + (r / σ)²),  r = ‖p*_kt − Π(G_t G_k⁻¹ Π⁻¹(p, d_k))‖ in grid px;
+4. model selection: the refined pose replaces the interpolation only where it
+   lowers the mean robust cost ρ(r) = log(1 + (r/σ)²) to below ``min_gain`` of
+   the interpolation's.  A near-still camera that wobbles smoothly is
+   interpolated almost exactly, and the flow against its keyframes' young
+   depths only adds noise.  On the generator's 450-frame presets: wobble
+   0.56 cm interpolated, 0.93 cm always refined, 0.67 cm with min_gain 0.5;
+   walk 1.23 cm interpolated, 1.04-1.05 cm refined either way.
 
 Both sides matter: against a alone the camera centre of a frame a few frames
 away is poorly conditioned (rotation and translation trade off), 2 cm median
@@ -182,10 +189,24 @@ class TrajectoryFiller:
         params = dataclasses.replace(fe.params, t0=na, motion_only=True, optimize_focal="none",
                                      uncertainty=dataclasses.replace(fe.params.uncertainty, enable=False))
         sigma = self.cfg.robust_sigma
-        for _ in range(self.cfg.iters):
-            coords, valid = fe.backend.reproject(state, ii, jj, fe.params.min_depth)
+
+        def residual(st: BAState) -> tuple[Tensor, Tensor]:
+            coords, valid = fe.backend.reproject(st, ii, jj, fe.params.min_depth)
             r = torch.hypot(target[..., 0] - coords[..., 0], target[..., 1] - coords[..., 1])
-            weight = base * valid.float() / (1.0 + (r / sigma) ** 2)
-            edges = EdgeSet(ii, jj, target, weight[..., None].expand(-1, h, w, 2).contiguous())
+            return r, base * valid.float()
+
+        def robust_cost(r: Tensor, w: Tensor) -> Tensor:  # per frame: Σ w log(1 + (r/σ)²) / Σ w
+            num = (w * torch.log1p((r / sigma) ** 2)).sum((1, 2)).view(na, m).sum(0)
+            return num / w.sum((1, 2)).view(na, m).sum(0).clamp_min(1e-9)
+
+        start = None
+        for _ in range(self.cfg.iters):
+            r, w_valid = residual(state)
+            if start is None:
+                start = robust_cost(r, w_valid)
+            edges = EdgeSet(ii, jj, target, (w_valid / (1.0 + (r / sigma) ** 2))[..., None].expand(-1, h, w, 2).contiguous())
             state = fe.backend.ba_step(state, edges, params).state
-        return state.poses[na:]
+        final = robust_cost(*residual(state))
+        # model selection: keep the interpolation unless the flow explains the refined pose clearly better
+        better = (final < self.cfg.min_gain * start)[:, None]
+        return torch.where(better, state.poses[na:], init)
