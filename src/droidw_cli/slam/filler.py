@@ -72,7 +72,7 @@ class TrajectoryFiller:
         ts = torch.tensor([t for _, t, _ in frames], dtype=torch.float64)
         if a is not None and b is not None:
             ta, tb = buf.timestamps[a[0]], buf.timestamps[b[0]]
-            alpha = ((ts - ta) / max(tb - ta, 1e-9)).clamp(0, 1).float()
+            alpha = ((ts - ta) / max(tb - ta, 1e-9)).clamp(0, 1).float().to(buf.poses.device)
             init = interpolate(buf.poses[a[0]].expand(len(frames), 7), buf.poses[b[0]].expand(len(frames), 7), alpha)
         else:
             init = buf.poses[anchors[0][0]].expand(len(frames), 7).clone()
@@ -90,9 +90,10 @@ class TrajectoryFiller:
         na, m = len(anchors), len(frames)
         kf = [k for k, _ in anchors]
         h, w = buf.grid
-        disps = torch.cat([buf.disps[kf], torch.ones(m, h, w)])
-        ii = torch.arange(na).repeat_interleave(m)
-        jj = na + torch.arange(m).repeat(na)
+        dev = buf.device
+        disps = torch.cat([buf.disps[kf], torch.ones(m, h, w, device=dev)])
+        ii = torch.arange(na, device=dev).repeat_interleave(m)
+        jj = na + torch.arange(m, device=dev).repeat(na)
         guess = BAState(torch.cat([buf.poses[kf], init]), disps, fe.shared.intrinsics.clone())
         coords, valid = fe.backend.reproject(guess, ii, jj, fe.params.min_depth)
         induced = coords.cpu() - fe.grid_coords
@@ -106,7 +107,7 @@ class TrajectoryFiller:
             if self.weight_factors is not None:
                 weight = weight * self.weight_factors[kf[a]][..., None]
             weights.append(weight)
-        edges = EdgeSet(ii, jj, torch.stack(targets).float(), torch.stack(weights).float())
+        edges = EdgeSet(ii, jj, torch.stack(targets).float().to(dev), torch.stack(weights).float().to(dev))
         state = BAState(torch.cat([buf.poses[kf], init]), disps, fe.shared.intrinsics.clone())
         params = dataclasses.replace(fe.params, t0=na, motion_only=True, optimize_focal="none",
                                      uncertainty=dataclasses.replace(fe.params.uncertainty, enable=False))
