@@ -21,8 +21,8 @@ from torch import Tensor
 class KeyframeBuffer:
     """Growable storage for keyframe state (capacity doubles when full)."""
 
-    def __init__(self, grid: tuple[int, int], feature_channels: int = 0, feature_dtype=torch.float16, capacity: int = 64,
-                 device: torch.device | str = "cpu"):
+    def __init__(self, grid: tuple[int, int], feature_channels: int = 0, feature_dtype=torch.float16,
+                 capacity: int = 64, device: torch.device | str = "cpu"):
         self.grid = grid
         self.count = 0
         self.device = torch.device(device)
