@@ -14,7 +14,8 @@ install: $(PY)
 	$(PIP) install -q --upgrade pip
 	# torch first: 2.13.0 resolves to the local CPU wheel (any other pin pulls CUDA).
 	$(PIP) install -q torch==2.13.0
-	$(PIP) install -q -e ".[test]" -e backends/cpu -e backends/cuda
+	# the optional extras too (Ray for `droidw batch`, rerun for `droidw view`), so that `make test` covers them
+	$(PIP) install -q -e ".[test,ray,view]" -e backends/cpu -e backends/cuda
 
 test: install
 	$(PY) -m pytest -q $(PYTEST_ARGS)

@@ -174,3 +174,48 @@ def test_max_diff_controls_matching(files, capsys):
     assert code == 2 and "no overlapping timestamps" in err
     code, out, _ = run(argv + ["--max-diff", "0.005", "--t-offset", "-0.01"], capsys)
     assert code == 0 and json.loads(out)["matches"] == 120
+
+
+def test_save_results_is_read_by_evo_res(files, capsys):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    file_interface = pytest.importorskip("evo.tools.file_interface")
+    zip_path = files / "res" / "droidw.zip"
+    argv = ["eval", "--gt", str(files / "gt.txt"), "--est", str(files / "est.txt"), "--save-results", str(zip_path)]
+    code, out, err = run(argv, capsys)
+    assert code == 0, err
+    assert f"evo results written to {zip_path}" in out
+    assert sorted(p.name for p in zip_path.parent.iterdir()) == ["droidw.zip"]
+    res = file_interface.load_res_file(zip_path)
+    ref = expected(files)
+    assert res.stats["rmse"] == pytest.approx(ref.rmse, rel=1e-12)
+    assert res.info["est_name"] == str(files / "est.txt") and res.info["ref_name"] == str(files / "gt.txt")
+    assert res.np_arrays["error_array"].shape == (120,)
+    assert "Sim(3)" in res.info["title"]
+    evo_res = Path(sys.executable).parent / "evo_res"
+    if evo_res.is_file():  # evo's own command line reads it back
+        proc = subprocess.run([str(evo_res), str(zip_path), "--no_warnings"], capture_output=True, text=True,
+                              timeout=120, env={**os.environ, "MPLBACKEND": "Agg"})
+        assert proc.returncode == 0, proc.stderr
+        assert f"{ref.rmse:.6f}" in proc.stdout
+
+
+def test_plot_uses_evo_top_view_with_error_colours(files, capsys):
+    pytest.importorskip("evo.tools.plot")
+    import matplotlib
+
+    png = files / "top.png"
+    code, _, err = run(["eval", "--gt", str(files / "gt.txt"), "--est", str(files / "est.txt"), "--plot", str(png),
+                        "--align", "se3"], capsys)
+    assert code == 0, err
+    assert png.read_bytes()[:8] == PNG_MAGIC
+    assert matplotlib.get_backend().lower() == "agg"
+    import cv2
+
+    img = cv2.imread(str(png))
+    # evo's colour bar (the jet map) puts saturated red and blue pixels in the picture
+    b, g, r = (img[..., k].astype(int) for k in range(3))
+    assert ((r > 200) & (g < 60) & (b < 60)).any() and ((b > 120) & (r < 40) & (g < 40)).any()

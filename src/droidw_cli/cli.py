@@ -23,6 +23,8 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "backends": ("droidw_cli.commands.backends", "backends", "List the BA backends and whether they can run here."),
     "demo": ("droidw_cli.commands.demo", "demo", "Generate a synthetic dynamic scene, track it and evaluate it."),
     "synth": ("droidw_cli.commands.synth", "synth", "Generate a synthetic dynamic-scene sequence with exact ground truth."),
+    "batch": ("droidw_cli.commands.batch", "batch", "Track and evaluate every sequence of a manifest (Ray for parallel runs)."),
+    "view": ("droidw_cli.commands.view", "view", "Show a run in the rerun viewer, or save it as an .rrd file."),
 }
 
 
@@ -56,6 +58,8 @@ def cli() -> None:
       droidw track video.mp4 --calib auto --out run/
       droidw eval --gt groundtruth.txt --est run/
       droidw export ply run/ --out static.ply
+      droidw batch manifest.yaml --out runs/ --workers 4
+      droidw view run/ --save run.rrd
     """
 
 

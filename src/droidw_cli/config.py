@@ -36,6 +36,7 @@ class IOConfig:
     max_frames: int = 0  # 0 = all
     thumbnail_scale: int = 4  # keyframe thumbnails at 1/thumbnail_scale of the working size
     use_depth: bool = False  # RGB-D: sensor depth feeds the depth-prior term (rgbd.yaml)
+    prefetch: int = 4  # frames decoded and prepared ahead on a background thread (0: none)
 
 
 @dataclass(frozen=True)
@@ -127,14 +128,16 @@ class BackendConfig:
 
 @dataclass(frozen=True)
 class FillerConfig:
-    """Poses for non-keyframes: SE(3) interpolation then motion-only BA against the two keyframes.
+    """Poses for non-keyframes, online, from the motion filter's flow (:mod:`droidw_cli.slam.filler`).
 
-    ``preset``: the DIS preset of the filler's flow (it is started from the
-    induced flow, so a cheaper preset than the frontend's suffices).
+    A gap's frames are solved once its anchor keyframe is ``lag`` keyframes
+    old, by ``iters`` motion-only IRLS iterations with a Cauchy weight of scale
+    ``robust_sigma`` grid px.
     """
 
     iters: int = 3
-    preset: str = "medium"
+    lag: int = 2
+    robust_sigma: float = 0.25  # grid px
     uncertainty: bool = True  # weight the keyframes' pixels by their uncertainty
 
 
@@ -176,6 +179,10 @@ class TrackConfig:
     uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
     ba: BAParams = field(default_factory=BAParams)
     seed: int = 0
+    # torch intra-op threads of the BA; 0: one less than the usable cores (1 on 2 cores, at most 8).
+    # On 2 cores, 2 torch threads stall whenever anything else runs (ba_step 25/75: 852 ms against
+    # 20 ms with 1 thread while other processes were busy), and the prefetch thread and DIS need a core.
+    threads: int = 0
 
     def __post_init__(self) -> None:
         # The uncertainty section is the single source of truth for the BA's copy.

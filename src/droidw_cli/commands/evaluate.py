@@ -27,25 +27,29 @@ FORMAT_CHOICES = click.Choice(["auto", "tum", "kitti", "euroc"], case_sensitive=
 @click.option("--rpe", "rpe_delta", type=click.IntRange(min=1), default=None, metavar="DELTA",
               help="Also report the translational RPE over pose pairs DELTA matched frames apart.")
 @click.option("--plot", "plot_path", type=str, default=None, metavar="PNG",
-              help="Write a top view of both trajectories after alignment.")
+              help="Write evo's top view of both trajectories after alignment, the estimate coloured by its error.")
+@click.option("--save-results", "results_path", type=str, default=None, metavar="FILE.zip",
+              help="Write the ATE in evo's result format, for `evo_res` to compare with other systems.")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object instead of the table.")
 def evaluate(gt_path: str, est_path: str, align: str, max_diff: float, t_offset: float, fmt: str,
              gt_format: str | None, gt_times: str | None, est_times: str | None, rpe_delta: int | None,
-             plot_path: str | None, as_json: bool) -> None:
+             plot_path: str | None, results_path: str | None, as_json: bool) -> None:
     """Evaluate an estimated trajectory against ground truth: ATE after Umeyama alignment.
 
-    KITTI files carry no timestamps: two KITTI files are paired by index, or
-    give --gt-times / --est-times.
+    The association, alignment and metrics are evo's (the same numbers as
+    `evo_ape tum GT EST -a [-s]`).  KITTI files carry no timestamps: two KITTI
+    files are paired by index, or give --gt-times / --est-times.
 
     \b
     Examples:
       droidw eval --gt groundtruth.txt --est run/
       droidw eval --gt gt.csv --est traj.txt --align se3 --rpe 10 --plot top.png
       droidw eval --gt KITTI_00_gt.txt --est KITTI_00_ORB.txt --json
+      droidw eval --gt groundtruth.txt --est run/ --save-results droidw.zip && evo_res droidw.zip other.zip
     """
     from droidw_cli.eval import inputs
     from droidw_cli.eval.metrics import evaluate_ate, evaluate_rpe
-    from droidw_cli.eval.report import EvalInfo, format_text, plot_top_view, to_json_dict
+    from droidw_cli.eval.report import EvalInfo, format_text, plot_top_view, save_results, to_json_dict
 
     fmt = fmt.lower()
     gt = inputs.load(gt_path, (gt_format or fmt).lower(), gt_times, role="gt")
@@ -56,11 +60,17 @@ def evaluate(gt_path: str, est_path: str, align: str, max_diff: float, t_offset:
     info = EvalInfo(str(gt.path), str(est.path), len(gt.traj), len(est.traj), max_diff, by_index)
     if plot_path is not None:
         plot_top_view(plot_path, gt.traj, est.traj, ate)
+    if results_path is not None:
+        save_results(results_path, ate, str(gt.path), str(est.path))
     if as_json:
         out = to_json_dict(info, ate, rpe)
         out["plot"] = plot_path
+        out["results"] = results_path
         click.echo(json.dumps(out))
         return
     click.echo(format_text(info, ate, rpe))
-    if plot_path is not None:
-        click.echo(f"\nplot written to {plot_path}")
+    written = [f"plot written to {plot_path}"] if plot_path is not None else []
+    if results_path is not None:
+        written.append(f"evo results written to {results_path}")
+    if written:
+        click.echo("\n" + "\n".join(written))

@@ -69,6 +69,15 @@ class CorrespondenceSource(ABC):
         back = None if init_flow is None else invert_flow(np.asarray(init_flow, dtype=np.float32))
         return self.match(image_i, image_j, init_flow), self.match(image_j, image_i, back)
 
+    def quick_target(self, image_i: np.ndarray, image_j: np.ndarray) -> torch.Tensor:
+        """A cheap target p*_ij (H/8, W/8, 2) with no confidence, for the trajectory filler.
+
+        The filler refines one pose per frame against fixed keyframes and weights
+        pixels by its own robust loss, so it needs many correspondences cheaply,
+        not a confidence.  The default is :meth:`match`'s target.
+        """
+        return self.match(image_i, image_j).target
+
     def mean_flow(self, image_i: np.ndarray, image_j: np.ndarray) -> float:
         """A cheap estimate of the mean flow magnitude i → j in full-res px (for the motion filter).
 

@@ -33,6 +33,9 @@ PRESETS = {
 # to the motion filter's 3 px threshold; FAST at 1/2 reads 0.3-1.4 px there.
 MEAN_FLOW_SCALE = 2
 MEAN_FLOW_PRESET = "fast"
+# quick_target (the filler's flow): FAST at the working resolution, one direction.  At half
+# resolution the filler's camera centres were 2-3× worse on the generator's walks.
+QUICK_TARGET_PRESET = "fast"
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -62,6 +65,7 @@ class DISCorrespondence(CorrespondenceSource):
         self.cfg = cfg
         self._dis = cv2.DISOpticalFlow_create(PRESETS[cfg.preset])
         self._dis_quick = cv2.DISOpticalFlow_create(PRESETS[MEAN_FLOW_PRESET])
+        self._dis_target = cv2.DISOpticalFlow_create(PRESETS[QUICK_TARGET_PRESET])
 
     def flow(self, gray_i: np.ndarray, gray_j: np.ndarray, init_flow: np.ndarray | None = None) -> np.ndarray:
         """(H, W, 2) float32 DIS flow gray_i → gray_j, optionally started from ``init_flow``."""
@@ -100,6 +104,12 @@ class DISCorrespondence(CorrespondenceSource):
         gray_i, gray_j = to_gray(image_i), to_gray(image_j)
         fwd, bwd = self._flows(gray_i, gray_j, init)
         return self._scored(gray_i, gray_j, fwd, bwd), self._scored(gray_j, gray_i, bwd, fwd)
+
+    def quick_target(self, image_i: np.ndarray, image_j: np.ndarray) -> torch.Tensor:
+        """Target i → j from one FAST DIS flow at the working resolution (no confidence)."""
+        self._check(image_i, image_j, None)
+        flow = self._dis_target.calc(to_gray(image_i), to_gray(image_j), None)
+        return torch.from_numpy(flow_to_target(flow))
 
     def mean_flow(self, image_i: np.ndarray, image_j: np.ndarray) -> float:
         """Mean flow magnitude (full-res px) from FAST DIS on half-size grayscale images (cheap; for the motion filter)."""

@@ -1,4 +1,6 @@
-"""Trajectory evaluation: timestamp association, Umeyama alignment, ATE / RPE, reports.
+"""Trajectory evaluation, a thin layer over evo: association (``evo.core.sync``), Umeyama
+alignment (``PoseTrajectory3D.align``), ATE / RPE (``evo.core.metrics``), plus droidw's
+checks, error messages and reports.
 
 The usual entry point is :func:`evaluate_ate`::
 

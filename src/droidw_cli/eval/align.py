@@ -1,21 +1,10 @@
-"""Umeyama alignment of point sets: Sim(3), SE(3) or none.
+"""Umeyama alignment of point sets (Sim(3), SE(3) or none), computed by evo.
 
-Given matched positions ``x_i`` (estimate) and ``y_i`` (ground truth),
-``i = 1..n``, find ``c, R, t`` minimising ``Σ ||y_i - (c R x_i + t)||²``
-(Umeyama 1991, PAMI 13(4)):
-
-    μx = mean(x),  μy = mean(y),  σx² = (1/n) Σ ||x_i - μx||²
-    Σxy = (1/n) Σ (y_i - μy)(x_i - μx)ᵀ = U D Vᵀ              (SVD)
-    S = diag(1, 1, sign(det U · det V))                     (reflection fix)
-    R = U S Vᵀ,   c = tr(D S) / σx²   (c = 1 for SE(3)),   t = μy - c R μx
-
-Without the reflection fix, a mirrored point set would produce det R = -1.
-Aligned poses: ``T' = [R R_i | c R t_i + t]`` (the estimate's scale changes,
-its orientations are only rotated).
-
-Degenerate inputs raise :class:`DegenerateGeometryError`: the rotation is
-undetermined when either point set is collinear (second singular value of
-its centred covariance ≈ 0) or a single point (first one ≈ 0).
+``umeyama`` is :func:`evo.core.geometry.umeyama_alignment` (Umeyama 1991,
+with the reflection fix) behind droidw's own guard: identical or collinear
+point sets, for which the rotation is undetermined, raise
+:class:`DegenerateGeometryError` with a message that says which, instead of
+evo's generic rank error.  Aligned poses: ``T' = [R R_i | c R t_i + t]``.
 """
 
 from __future__ import annotations
@@ -51,6 +40,13 @@ class Sim3:
     def identity() -> "Sim3":
         return Sim3(np.eye(3), np.zeros(3), 1.0)
 
+    @staticmethod
+    def from_matrix(m: np.ndarray) -> "Sim3":
+        """From a 4×4 ``[[c R, t], [0, 1]]`` (evo's ``alignment_transformation_sim3``)."""
+        m = np.asarray(m, dtype=np.float64)
+        scale = float(np.cbrt(np.linalg.det(m[:3, :3])))
+        return Sim3(m[:3, :3] / scale, m[:3, 3].copy(), scale)
+
     def apply_points(self, points: np.ndarray) -> np.ndarray:
         """(N, 3) → (N, 3)."""
         return self.scale * np.asarray(points, dtype=np.float64) @ self.rotation.T + self.translation
@@ -67,10 +63,9 @@ class Sim3:
 def check_not_degenerate(points: np.ndarray, what: str = "positions") -> None:
     """Raise :class:`DegenerateGeometryError` if ``points`` (N, 3) are all identical or collinear.
 
-    Uses the singular values ``s1 ≥ s2 ≥ s3`` of the centred covariance
-    ``(1/n) Σ (p_i - μ)(p_i - μ)ᵀ``: identical when ``s1`` is at round-off
-    level for the coordinates' magnitude, collinear when ``s2 / s1 < COLLINEAR_RTOL``.
-    A planar set (``s3 = 0``) is fine: Umeyama determines R from two directions.
+    Uses the singular values ``s1 ≥ s2 ≥ s3`` of the centred covariance: identical when
+    ``s1`` is at round-off level for the coordinates' magnitude, collinear when
+    ``s2 / s1 < COLLINEAR_RTOL``.  A planar set (``s3 = 0``) is fine.
     """
     p = np.asarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3:
@@ -86,31 +81,30 @@ def check_not_degenerate(points: np.ndarray, what: str = "positions") -> None:
         )
 
 
-def umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool = True) -> Sim3:
-    """The Sim(3) (or SE(3) when ``with_scale`` is False) taking ``src`` (N, 3) onto ``dst`` (N, 3).
+def check_alignable(est: np.ndarray, gt: np.ndarray) -> None:
+    """Both matched position sets must determine a rotation (see :func:`check_not_degenerate`)."""
+    check_not_degenerate(gt, "ground-truth positions")
+    check_not_degenerate(est, "estimated positions")
 
-    Float64 throughout.  Raises :class:`DegenerateGeometryError` for identical or
-    collinear point sets and ``ValueError`` for mismatched shapes.
+
+def umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool = True) -> Sim3:
+    """The Sim(3) (or SE(3) when ``with_scale`` is False) taking ``src`` (N, 3) onto ``dst`` (N, 3), by evo.
+
+    Raises :class:`DegenerateGeometryError` for identical or collinear point sets
+    and ``ValueError`` for mismatched shapes.
     """
+    from evo.core.geometry import GeometryException, umeyama_alignment
+
     x = np.asarray(src, dtype=np.float64)
     y = np.asarray(dst, dtype=np.float64)
     if x.shape != y.shape or x.ndim != 2 or x.shape[1] != 3:
         raise ValueError(f"src and dst must both be (N, 3), got {x.shape} and {y.shape}")
-    check_not_degenerate(y, "ground-truth positions")
-    check_not_degenerate(x, "estimated positions")
-    n = x.shape[0]
-    mu_x, mu_y = x.mean(axis=0), y.mean(axis=0)
-    xc, yc = x - mu_x, y - mu_y
-    var_x = float(np.sum(xc * xc)) / n
-    cov = yc.T @ xc / n
-    u, d, vt = np.linalg.svd(cov)
-    s = np.ones(3)
-    if np.linalg.det(u) * np.linalg.det(vt) < 0.0:
-        s[2] = -1.0
-    rotation = (u * s) @ vt
-    scale = float(np.sum(d * s) / var_x) if with_scale else 1.0
-    translation = mu_y - scale * rotation @ mu_x
-    return Sim3(rotation, translation, scale)
+    check_alignable(x, y)
+    try:
+        rotation, translation, scale = umeyama_alignment(x.T, y.T, with_scale)
+    except GeometryException as exc:
+        raise DegenerateGeometryError(f"degenerate geometry: {exc}") from None
+    return Sim3(np.asarray(rotation), np.asarray(translation), float(scale))
 
 
 def align_positions(est: np.ndarray, gt: np.ndarray, mode: str = "sim3") -> Sim3:

@@ -1,30 +1,29 @@
-"""Absolute and relative trajectory error.
+"""Absolute and relative trajectory error, computed by evo.
 
-ATE (translation part, as evo's APE): after associating and aligning,
+ATE is evo's APE of the translation part (``evo_ape ... -a [-s]``) on the
+associated poses after Umeyama alignment, ``e_i = ‖p_gt,i − (c R p_est,i + t)‖``:
+:func:`evaluate_ate` builds the two ``PoseTrajectory3D`` and calls
+:func:`evo.main_ape.ape`, whose :class:`evo.core.result.Result` it keeps (so
+that ``--save-results`` writes exactly what ``evo_ape --save_results`` would).
 
-    e_i = || p_gt,i - (c R p_est,i + t) ||,   RMSE = sqrt(mean e_i²)
+RPE is evo's ``metrics.RPE`` (translation part, ``delta`` in frames,
+consecutive pairs ``(0, Δ), (Δ, 2Δ), …``) on the matched poses after the same
+alignment, so with Sim(3) it is in metres of the ground truth.
 
-with mean, median, max, min and (population) std of ``e_i``.
-
-RPE (translation part, as evo's RPE with ``delta`` in frames, consecutive
-pairs): for the matched, aligned poses take index pairs
-``(0, Δ), (Δ, 2Δ), …`` and
-
-    E_k = (Q_i⁻¹ Q_j)⁻¹ (P_i⁻¹ P_j),   e_k = || trans(E_k) ||
-
-where ``Q`` are ground-truth and ``P`` aligned estimated camera-to-world
-poses.  With Sim(3) alignment the estimate's translations carry the scale,
-so RPE is in metres of the ground truth.
+droidw adds its own checks and messages in front: no common timestamps,
+fewer than :data:`MIN_MATCHES` pairs, identical or collinear positions.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import inspect
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from droidw_cli.errors import InputError
-from droidw_cli.eval.align import Sim3, align_positions
+from droidw_cli.eval.align import ALIGN_MODES, Sim3, check_alignable
 from droidw_cli.eval.associate import Association, AssociationError, associate, associate_by_index
 from droidw_cli.io.trajectory import Trajectory
 
@@ -53,6 +52,12 @@ class ErrorStats:
             max=float(np.max(e)), min=float(np.min(e)), std=float(np.std(e)), count=int(e.size),
         )
 
+    @staticmethod
+    def from_evo(stats: dict, count: int) -> "ErrorStats":
+        """From evo's ``get_all_statistics()`` dict."""
+        return ErrorStats(**{k: float(stats[k]) for k in ("rmse", "mean", "median", "max", "min", "std")},
+                          count=int(count))
+
     def as_dict(self) -> dict[str, float | int]:
         return {"rmse": self.rmse, "mean": self.mean, "median": self.median, "max": self.max,
                 "min": self.min, "std": self.std, "count": self.count}
@@ -64,7 +69,9 @@ class AteResult:
 
     ``positions`` are the aligned estimated positions of the matched poses
     (M, 3); ``gt_positions`` the matching ground-truth ones; ``errors`` the
-    per-pose distances; ``gt_index`` / ``est_index`` the matched pose indices.
+    per-pose distances; ``gt_index`` / ``est_index`` the matched pose indices;
+    ``evo_result`` evo's APE result object (info, stats, error array, aligned
+    trajectories).
     """
 
     rmse: float
@@ -82,10 +89,8 @@ class AteResult:
     gt_index: np.ndarray
     est_index: np.ndarray
     align: str = "sim3"
-
-    @property
-    def min(self) -> float:
-        return float(np.min(self.errors))
+    min: float = 0.0
+    evo_result: Any = field(default=None, repr=False)
 
     @property
     def transform(self) -> Sim3:
@@ -93,7 +98,7 @@ class AteResult:
 
     @property
     def stats(self) -> ErrorStats:
-        return ErrorStats.from_errors(self.errors)
+        return ErrorStats(self.rmse, self.mean, self.median, self.max, self.min, self.std, self.matches)
 
 
 @dataclass(frozen=True)
@@ -120,51 +125,71 @@ def match(gt: Trajectory, est: Trajectory, max_diff: float = 0.02, offset: float
     return assoc
 
 
-def evaluate_ate(gt: Trajectory, est: Trajectory, align: str = "sim3", max_diff: float = 0.02, *,
-                 offset: float = 0.0, by_index: bool = False) -> AteResult:
-    """Associate, align (``sim3`` | ``se3`` | ``none``) and compute the ATE of ``est`` against ``gt``.
+def evo_trajectory(traj: Trajectory, index: np.ndarray | None = None, name: str | None = None):
+    """An ``evo.core.trajectory.PoseTrajectory3D`` of ``traj`` (or of its poses ``index``)."""
+    from evo.core.trajectory import PoseTrajectory3D
 
+    t = traj if index is None else traj.subset(index)
+    out = PoseTrajectory3D(poses_se3=list(np.asarray(t.poses, dtype=np.float64)),
+                           timestamps=np.asarray(t.timestamps, dtype=np.float64).copy())
+    out.name = name  # evo ≥ 1.3x labels results by it (older ones take names as ape() arguments)
+    return out
+
+
+def evaluate_ate(gt: Trajectory, est: Trajectory, align: str = "sim3", max_diff: float = 0.02, *,
+                 offset: float = 0.0, by_index: bool = False,
+                 names: tuple[str, str] = ("reference", "estimate")) -> AteResult:
+    """Associate, align (``sim3`` | ``se3`` | ``none``) and compute the ATE of ``est`` against ``gt`` with evo.
+
+    ``names`` label the ground truth and the estimate in evo's result.
     Raises :class:`AssociationError` (no common timestamps),
     :class:`TooFewMatchesError` (< 3 pairs) or
     :class:`~droidw_cli.eval.align.DegenerateGeometryError`, all ``InputError``.
     """
+    if align not in ALIGN_MODES:
+        raise ValueError(f"unknown alignment {align!r}; use one of {', '.join(ALIGN_MODES)}")
+    from evo.core import metrics
+    from evo.main_ape import ape
+
     assoc = match(gt, est, max_diff, offset, by_index)
     gt_pos = gt.positions[assoc.gt_index]
-    est_pos = est.positions[assoc.est_index]
-    sim3 = align_positions(est_pos, gt_pos, align)
-    aligned = sim3.apply_points(est_pos)
-    errors = np.linalg.norm(gt_pos - aligned, axis=1)
-    s = ErrorStats.from_errors(errors)
+    if align != "none":
+        check_alignable(est.positions[assoc.est_index], gt_pos)
+    ref_name, est_name = names
+    extra = {"ref_name": ref_name, "est_name": est_name} if "est_name" in inspect.signature(ape).parameters else {}
+    result = ape(evo_trajectory(gt, assoc.gt_index, ref_name), evo_trajectory(est, assoc.est_index, est_name),
+                 metrics.PoseRelation.translation_part, align=align != "none", correct_scale=align == "sim3",
+                 **extra)
+    sim3 = (Sim3.from_matrix(result.np_arrays["alignment_transformation_sim3"]) if align != "none"
+            else Sim3.identity())
+    if align != "sim3":
+        sim3 = Sim3(sim3.rotation, sim3.translation, 1.0)
+    errors = np.asarray(result.np_arrays["error_array"], dtype=np.float64)
+    s = ErrorStats.from_evo(result.stats, errors.size)
     return AteResult(
-        rmse=s.rmse, mean=s.mean, median=s.median, max=s.max, std=s.std, matches=s.count,
+        rmse=s.rmse, mean=s.mean, median=s.median, max=s.max, std=s.std, min=s.min, matches=s.count,
         scale=float(sim3.scale), rotation=sim3.rotation, translation=sim3.translation,
-        positions=aligned, gt_positions=gt_pos, errors=errors,
-        gt_index=assoc.gt_index, est_index=assoc.est_index, align=align,
+        positions=np.asarray(result.trajectories[result.info["est_name"]].positions_xyz, dtype=np.float64),
+        gt_positions=gt_pos,
+        errors=errors, gt_index=assoc.gt_index, est_index=assoc.est_index, align=align, evo_result=result,
     )
 
 
 def relative_errors(gt_poses: np.ndarray, est_poses: np.ndarray, delta: int) -> np.ndarray:
-    """Translational RPE of consecutive pairs ``(kΔ, (k+1)Δ)`` of two matched (N, 4, 4) pose stacks."""
+    """evo's translational RPE of consecutive pairs ``(kΔ, (k+1)Δ)`` of two matched (N, 4, 4) pose stacks."""
+    from evo.core import metrics
+    from evo.core.trajectory import PosePath3D
+
     if delta < 1:
         raise ValueError(f"delta must be a positive number of frames, got {delta}")
     if gt_poses.shape != est_poses.shape:
         raise ValueError("pose stacks differ in shape")
-    ids = np.arange(0, gt_poses.shape[0], delta)
-    i, j = ids[:-1], ids[1:]
-    q_rel = _se3_inverse(gt_poses[i]) @ gt_poses[j]
-    p_rel = _se3_inverse(est_poses[i]) @ est_poses[j]
-    e = _se3_inverse(q_rel) @ p_rel
-    return np.linalg.norm(e[:, :3, 3], axis=1)
-
-
-def _se3_inverse(poses: np.ndarray) -> np.ndarray:
-    """(N, 4, 4) rigid transforms → inverses ``[Rᵀ | -Rᵀ t]``."""
-    inv = np.zeros_like(poses)
-    rt = np.swapaxes(poses[:, :3, :3], 1, 2)
-    inv[:, :3, :3] = rt
-    inv[:, :3, 3] = -(rt @ poses[:, :3, 3:4])[:, :, 0]
-    inv[:, 3, 3] = 1.0
-    return inv
+    if gt_poses.shape[0] <= delta:
+        return np.zeros(0)
+    rpe = metrics.RPE(metrics.PoseRelation.translation_part, int(delta), metrics.Unit.frames, all_pairs=False)
+    rpe.process_data((PosePath3D(poses_se3=list(np.asarray(gt_poses, dtype=np.float64))),
+                      PosePath3D(poses_se3=list(np.asarray(est_poses, dtype=np.float64)))))
+    return np.asarray(rpe.error, dtype=np.float64)
 
 
 def evaluate_rpe(gt: Trajectory, est: Trajectory, ate: AteResult, delta: int = 1) -> RpeResult:
@@ -181,5 +206,5 @@ def evaluate_rpe(gt: Trajectory, est: Trajectory, ate: AteResult, delta: int = 1
 
 __all__ = [
     "AteResult", "AssociationError", "ErrorStats", "RpeResult", "TooFewMatchesError",
-    "evaluate_ate", "evaluate_rpe", "match", "relative_errors",
+    "evaluate_ate", "evaluate_rpe", "evo_trajectory", "match", "relative_errors",
 ]

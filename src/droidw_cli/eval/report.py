@@ -1,16 +1,15 @@
-"""Reports of an evaluation: a text table, a JSON-ready dict and a top-view plot."""
+"""Reports of an evaluation: a text table, a JSON-ready dict, evo's result file and evo's top-view plot."""
 
 from __future__ import annotations
 
-import os
-import tempfile
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from droidw_cli.eval.metrics import AteResult, RpeResult
-from droidw_cli.io.trajectory import Trajectory
+from droidw_cli.io.trajectory import Trajectory, atomic_write_bytes
 
 ALIGN_NAMES = {"sim3": "Sim(3) Umeyama", "se3": "SE(3) Umeyama", "none": "none"}
 
@@ -84,44 +83,81 @@ def top_view_axes(points: np.ndarray) -> tuple[int, int]:
     return int(a), int(b)
 
 
+def _atomic_write(path: Path, write) -> None:
+    """Call ``write(binary file)`` on an in-memory buffer, then write it to ``path`` atomically."""
+    buf = io.BytesIO()
+    write(buf)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def _evo_plot_module():
+    """``evo.tools.plot`` with matplotlib on the Agg backend (no window, works headless).
+
+    evo applies its settings' ``plot_backend`` when the module is imported;
+    droidw only ever writes files, so it asks for Agg whatever the settings say.
+    """
+    from evo.tools.settings import SETTINGS
+
+    SETTINGS.plot_backend = "Agg"
+    from evo.tools import plot
+
+    import matplotlib.pyplot as plt
+
+    plt.switch_backend("Agg")
+    return plot, plt
+
+
 def plot_top_view(path: str | Path, gt: Trajectory, est: Trajectory, ate: AteResult) -> None:
-    """Write a PNG with the ground truth and the aligned estimate seen from 'above', atomically.
+    """Write a PNG with evo's plotting, atomically: the ground truth (grey, dashed) and the
+    aligned estimate coloured by its ATE, seen from 'above'.
 
     'Above' is along the axis of least ground-truth extent (z for TUM/EuRoC
-    motion-capture worlds, y for KITTI camera worlds).
+    motion-capture worlds, y for KITTI camera worlds).  ``est`` is unused: the
+    aligned, matched estimate comes from ``ate``.
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+    if ate.evo_result is None:
+        raise ValueError("plot_top_view needs an AteResult from evaluate_ate (with its evo result)")
+    plot, plt = _evo_plot_module()
+    from droidw_cli.eval.metrics import evo_trajectory
 
-    path = Path(path)
-    gt_xyz = gt.positions
-    est_xyz = ate.transform.apply_points(est.positions)
-    a, b = top_view_axes(gt_xyz)
-    names = "xyz"
-    fig = Figure(figsize=(7, 6), dpi=100)
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1)
-    ax.plot(gt_xyz[:, a], gt_xyz[:, b], "-", color="0.35", lw=1.5, label="ground truth")
-    ax.plot(est_xyz[:, a], est_xyz[:, b], "-", color="tab:blue", lw=1.0, label=f"estimate ({ate.align} aligned)")
-    ax.plot(gt_xyz[:1, a], gt_xyz[:1, b], "o", color="0.35", ms=5)
-    ax.plot(est_xyz[:1, a], est_xyz[:1, b], "o", color="tab:blue", ms=4)
-    ax.set_xlabel(f"{names[a]} [m]")
-    ax.set_ylabel(f"{names[b]} [m]")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.legend(loc="best")
-    title = f"ATE RMSE {ate.rmse:.4f} m, {ate.matches} poses"
-    if ate.align == "sim3":
-        title += f", scale {ate.scale:.4f}"
-    ax.set_title(title)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    a, b = top_view_axes(gt.positions)
+    mode = plot.PlotMode("xyz"[a] + "xyz"[b])
+    est_name = ate.evo_result.info["est_name"]
+    aligned = ate.evo_result.trajectories[est_name]
+    fig = plt.figure(figsize=(7, 6), dpi=100)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fig.savefig(fh, format="png")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        ax = plot.prepare_axis(fig, mode)
+        plot.traj(ax, mode, evo_trajectory(gt), "--", "gray", "ground truth")
+        lo, hi = float(np.min(ate.errors)), float(np.max(ate.errors))
+        plot.traj_colormap(ax, aligned, ate.errors, mode, min_map=lo, max_map=max(hi, lo + 1e-12), fig=fig)
+        title = f"ATE RMSE {ate.rmse:.4f} m, {ate.matches} poses, {ALIGN_NAMES.get(ate.align, ate.align)}"
+        if ate.align == "sim3":
+            title += f", scale {ate.scale:.4f}"
+        ax.set_title(title)
+        _atomic_write(Path(path), lambda fh: fig.savefig(fh, format="png"))
+    finally:
+        plt.close(fig)
+
+
+def save_results(path: str | Path, ate: AteResult, ref_name: str, est_name: str) -> None:
+    """Write the ATE as evo's result file (a zip that ``evo_res`` reads), atomically.
+
+    The same content as ``evo_ape ... --save_results``: info (title, label,
+    ref_name, est_name), stats, the error array, timestamps, the alignment;
+    the trajectories too when evo's ``save_traj_in_zip`` setting asks for them.
+    """
+    import copy
+
+    from evo.tools import file_interface
+    from evo.tools.settings import SETTINGS
+
+    if ate.evo_result is None:
+        raise ValueError("save_results needs an AteResult from evaluate_ate (with its evo result)")
+    result = copy.deepcopy(ate.evo_result)
+    old_ref, old_est = result.info["ref_name"], result.info["est_name"]
+    result.info["ref_name"], result.info["est_name"] = ref_name, est_name
+    trajectories = {ref_name: result.trajectories[old_ref], est_name: result.trajectories[old_est]}
+    result.trajectories.clear()
+    if SETTINGS.save_traj_in_zip:
+        result.trajectories.update(trajectories)
+    _atomic_write(Path(path), lambda fh: file_interface.save_res_file(fh, result))

@@ -27,15 +27,26 @@ def _legend(height: int, lo: float, hi: float) -> np.ndarray:
     return panel
 
 
-def overlay(image_rgb: np.ndarray, uncertainty: np.ndarray, lo: float, hi: float, alpha: float = 0.55) -> np.ndarray:
-    """BGR image: the keyframe with u (bilinearly upsampled) blended over it, plus the legend."""
+def uncertainty_range(unc: np.ndarray) -> tuple[float, float]:
+    """The colour map's range over a whole run: the 1st to the 99.5th percentile of u."""
+    lo, hi = float(np.percentile(unc, 1)), float(np.percentile(unc, 99.5))
+    return lo, max(hi, lo + 1e-3)
+
+
+def blend(image_rgb: np.ndarray, uncertainty: np.ndarray, lo: float, hi: float, alpha: float = 0.55) -> np.ndarray:
+    """BGR image: the keyframe with u (bilinearly upsampled, inferno colours) blended over it."""
     h, w = image_rgb.shape[:2]
     u = cv2.resize(uncertainty.astype(np.float32), (w, h), interpolation=cv2.INTER_LINEAR)
     norm = np.clip((u - lo) / max(hi - lo, 1e-6), 0, 1)
     heat = cv2.applyColorMap((norm * 255).astype(np.uint8), cv2.COLORMAP_INFERNO)
     base = cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR)
-    blended = cv2.addWeighted(base, 1 - alpha, heat, alpha, 0)
-    return np.concatenate([blended, _legend(h, lo, hi)], axis=1)
+    return cv2.addWeighted(base, 1 - alpha, heat, alpha, 0)
+
+
+def overlay(image_rgb: np.ndarray, uncertainty: np.ndarray, lo: float, hi: float, alpha: float = 0.55) -> np.ndarray:
+    """BGR image: :func:`blend` plus the legend."""
+    blended = blend(image_rgb, uncertainty, lo, hi, alpha)
+    return np.concatenate([blended, _legend(blended.shape[0], lo, hi)], axis=1)
 
 
 def write_overlays(npz: dict, out_dir: Path, video: bool = False, scale: int = 2, fps: float = 5.0) -> list[Path]:
@@ -45,8 +56,7 @@ def write_overlays(npz: dict, out_dir: Path, video: bool = False, scale: int = 2
     unc = np.asarray(npz["uncertainty"], dtype=np.float32)
     images = np.asarray(npz["images"])
     index = np.asarray(npz["index"])
-    lo, hi = float(np.percentile(unc, 1)), float(np.percentile(unc, 99.5))
-    hi = max(hi, lo + 1e-3)
+    lo, hi = uncertainty_range(unc)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths, frames = [], []
     for k in range(len(unc)):

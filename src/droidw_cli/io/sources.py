@@ -79,6 +79,7 @@ class ListSource(FrameSource):
     """A source whose raw frames are a list of image files (with optional depth PNGs)."""
 
     depth_scale = 5000.0  # uint16 depth PNG units per metre (TUM / Bonn)
+    load_depth = True  # False: skip decoding the depth PNGs (a monocular run does not read them)
 
     def __init__(self, path: Path, selection: Selection, fps: float, entries: Sequence[Entry]) -> None:
         super().__init__(path, selection, fps)
@@ -114,7 +115,7 @@ class ListSource(FrameSource):
                              f"{self.size[1]}x{self.size[0]}; frame {k} skipped")
                 continue
             depth = None
-            if entry.depth is not None:
+            if entry.depth is not None and self.load_depth:
                 depth = decode_depth(entry.depth, self.depth_scale)
                 if depth is None or depth.shape != self.size:
                     warn_corrupt(f"{entry.depth}: unreadable or mis-sized depth; frame {k} kept without depth")

@@ -73,6 +73,7 @@ class Frontend:
         self.shared = SharedState(intrinsics8.clone().float().to(dev), theta)
         self.images: dict[int, np.ndarray] = {}
         self.initialised = False
+        self.on_remove = None  # called with a keyframe's index just before keyframe removal drops it
         # epipolar motion segmentation: (Sampson distance map, raw confidence) of the window's edges.
         # Not while the focal length is estimated: on lady-running with --calib auto the masks
         # flagged 27-41 % of the view (not only the runner) and the estimated fx fell from
@@ -232,6 +233,8 @@ class Frontend:
         self._window_ba(lo, k, f.iters1)
         span = self.buffer.frame_index[k] - self.buffer.frame_index[k - 2] if k >= 2 else 0
         if k - 1 >= 1 and span <= f.removal_max_span and float(self.distance([k - 2], [k - 1])[0]) < f.keyframe_thresh:
+            if self.on_remove is not None:
+                self.on_remove(k - 1)
             self._remove(k - 1)
             return k - 1
         self._window_ba(lo, k, f.iters2)

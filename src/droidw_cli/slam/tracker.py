@@ -1,13 +1,16 @@
 """``droidw track``'s pipeline: frames in, a pose for every frame out.
 
-First pass: motion filter → keyframes → frontend (initialisation, window BA
-with uncertainty).  Then the global BA.  Second pass over the re-iterable
-source: the trajectory filler gives every frame a pose.
+One pass: motion filter → keyframes → frontend (initialisation, window BA
+with uncertainty); every other frame goes to the trajectory filler with the
+motion filter's flow from the newest keyframe, and gets its pose relative to
+that keyframe once the keyframe has settled.  Then the global BA, and the
+filler composes every frame's pose with its keyframe's final pose.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -23,12 +26,13 @@ from droidw_cli.errors import InputError
 from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics, unscale_intrinsics
 from droidw_cli.io.calibration import Calibration
 from droidw_cli.io.frames import FrameSource
+from droidw_cli.io.prefetch import prefetched
 from droidw_cli.io.prepare import FramePreparer
 from droidw_cli.slam.backend import global_ba
 from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.frontend import Frontend
 from droidw_cli.slam.motion_filter import MotionFilter
-from droidw_cli.ba.uncertainty import uncertainty_map, weight_factor, weighting_input
+from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.timing import StageTimer, Timed
 
@@ -90,8 +94,16 @@ def _keyframe_uncertainty(frontend: Frontend, evidence: torch.Tensor | None) -> 
     return uncertainty_map(buf.features[:len(buf)].float(), theta, frontend.params.uncertainty.softplus_offset, evidence)
 
 
+def torch_threads(requested: int) -> int:
+    """Torch threads for ``threads`` = requested (0: usable cores − 1, clamped to 1 … 8)."""
+    if requested > 0:
+        return requested
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(cores - 1, 8))
+
+
 class Tracker:
-    """Runs the two passes of the pipeline over one frame source."""
+    """Runs the pipeline over one frame source."""
 
     def __init__(self, cfg: TrackConfig, backend: BABackend, correspondence, features=None, progress: bool = True):
         self.cfg = cfg
@@ -101,15 +113,50 @@ class Tracker:
         self.progress = progress
         self.timer = StageTimer()
 
-    def _filler_correspondence(self, frontend_corr):
-        """The filler's correspondence source: the frontend's, at the filler's DIS preset where it has one."""
-        inner = self.correspondence
-        if not hasattr(inner, "cfg") or getattr(inner.cfg, "preset", None) in (None, self.cfg.filler.preset):
-            return frontend_corr
-        other = type(inner)(dataclasses.replace(inner.cfg, preset=self.cfg.filler.preset))
-        return Timed(other, self.timer, "flow", ("match", "match_pair"))
+    def _first_pass(self, items, fe: Frontend, mfilter: MotionFilter, filler: TrajectoryFiller,
+                    frames: list[tuple[int, float]], bar, grid: tuple[int, int], hw: tuple[int, int]) -> None:
+        """Motion filter, keyframes and the frontend; every other frame goes to the filler."""
+        cfg, timer, s = self.cfg, self.timer, self.cfg.io.thumbnail_scale
+        while True:
+            with timer("decode"):  # the wait for the prefetch thread
+                item = next(items, None)
+            if item is None:
+                return
+            frame, image, depth = item
+            frames.append((frame.index, frame.timestamp))
+            with timer("motion_filter"):
+                is_kf, _ = mfilter.check(image, fe.initialised)
+            if is_kf:
+                feats = None
+                if self.features is not None:
+                    with timer("features"):
+                        x = torch.from_numpy(image).permute(2, 0, 1)[None].float() / 255.0
+                        feats = self.features.extract(x)[0]
+                prior = None
+                if cfg.io.use_depth and depth is not None:
+                    d8 = cv2.resize(depth, (grid[1], grid[0]), interpolation=cv2.INTER_NEAREST)
+                    prior = torch.from_numpy(np.where(d8 > 0.1, 1.0 / np.maximum(d8, 1e-6), 0.0).astype(np.float32))
+                thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
+                fe.add_keyframe(frame.index, frame.timestamp, image, thumb, feats, prior)
+                mfilter.accept(image)
+                with timer("filler"):
+                    filler.update()
+            else:
+                with timer("filler"):
+                    filler.add_frame(frame.index, frame.timestamp, fe.buffer.frame_index[-1], image)
+            bar.update(1)
+            bar.set_postfix(kf=len(fe.buffer), refresh=False)
 
     def run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
+        """Track ``source``; ``calibration`` None estimates the focal length (``--calib auto``)."""
+        before = torch.get_num_threads()
+        torch.set_num_threads(torch_threads(self.cfg.threads))
+        try:
+            return self._run(source, calibration)
+        finally:
+            torch.set_num_threads(before)
+
+    def _run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
         cfg, timer = self.cfg, self.timer
         t_start = time.perf_counter()
         collected: list[str] = []
@@ -129,37 +176,23 @@ class Tracker:
         channels = self.features.channels if self.features is not None else 0
         fe = Frontend(cfg, params, backend, corr, grid, k8, channels)
         mfilter = MotionFilter(cfg.motion_filter)
+        filler = TrajectoryFiller(fe, cfg.filler)
+        fe.on_remove = filler.keyframe_removed
         frames: list[tuple[int, float]] = []
-        s = cfg.io.thumbnail_scale
 
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             bar = tqdm(total=len(source), desc="track", unit="frame", disable=not self.progress, dynamic_ncols=True)
-            it = iter(source)
-            while True:
-                with timer("decode"):
-                    frame = next(it, None)
-                    if frame is None:
-                        break
-                    image, depth = preparer(frame.image, frame.depth)
-                frames.append((frame.index, frame.timestamp))
-                with timer("motion_filter"):
-                    is_kf, _ = mfilter.check(image, fe.initialised)
-                if is_kf:
-                    feats = None
-                    if self.features is not None:
-                        with timer("features"):
-                            x = torch.from_numpy(image).permute(2, 0, 1)[None].float() / 255.0
-                            feats = self.features.extract(x)[0]
-                    prior = None
-                    if cfg.io.use_depth and depth is not None:
-                        d8 = cv2.resize(depth, (grid[1], grid[0]), interpolation=cv2.INTER_NEAREST)
-                        prior = torch.from_numpy(np.where(d8 > 0.1, 1.0 / np.maximum(d8, 1e-6), 0.0).astype(np.float32))
-                    thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
-                    fe.add_keyframe(frame.index, frame.timestamp, image, thumb, feats, prior)
-                    mfilter.accept(image)
-                bar.update(1)
-                bar.set_postfix(kf=len(fe.buffer), refresh=False)
+            restore = getattr(source, "load_depth", None)
+            if restore is not None:
+                source.load_depth = cfg.io.use_depth
+            items = prefetched(((f, *preparer(f.image, f.depth)) for f in source), cfg.io.prefetch)
+            try:
+                self._first_pass(items, fe, mfilter, filler, frames, bar, grid, hw)
+            finally:
+                items.close()  # stops the prefetch thread, also after an error
+                if restore is not None:
+                    source.load_depth = restore
             bar.close()
 
             if not frames:
@@ -175,24 +208,8 @@ class Tracker:
 
             evidence = fe.evidence()
             unc = _keyframe_uncertainty(fe, evidence)
-            # a keyframe pixel is only as good an anchor as its depth: weight it by the confidence its
-            # edges gave it in BA (zero where the epipolar masks removed a mover) and by its uncertainty
-            factors = _confidence(fe)
-            if unc is not None and cfg.filler.uncertainty:
-                mode = cfg.uncertainty.mode
-                factors = factors * weight_factor(weighting_input(unc, mode), mode)
-            filler = TrajectoryFiller(fe, cfg.filler.iters, factors.cpu(), self._filler_correspondence(corr))
             with timer("filler"):
-                if fe.initialised:
-                    bar = tqdm(total=len(frames), desc="fill", unit="frame", disable=not self.progress, dynamic_ncols=True)
-                    for frame in source:
-                        image, _ = preparer(frame.image, None)
-                        filler.push(frame.index, frame.timestamp, image)
-                        bar.update(1)
-                    bar.close()
-                    poses_w2c = filler.finish()
-                else:
-                    poses_w2c = {}
+                poses_w2c = filler.finish()
             collected += [str(w.message) for w in caught if not issubclass(w.category, DeprecationWarning)]
 
         ident = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
