@@ -81,15 +81,22 @@ def measure_window(backend, prob, reps: int, iters: int = 5) -> float | None:
                                                     evidence=True, lr=0.01))
     start = perturb(prob.truth, fixed=1, seed=1)
     n, c, h, w = start.features.shape
+    dev = backend.device
+    on_device = {"device": dev} if dev.type != "cpu" else {}  # (a baseline checkout may predate the argument)
+    edges = prob.edges.to(dev)
     times = []
     for _ in range(reps + 1):
-        buf = KeyframeBuffer((h, w), feature_channels=c)
+        buf = KeyframeBuffer((h, w), feature_channels=c, **on_device)
         for t in range(n):
             buf.append(t, float(t), start.poses[t], start.disps[t], None, start.features[t])
         theta = 0.01 * torch.randn(c + 3, generator=torch.Generator().manual_seed(0))
-        shared = SharedState(intrinsics=start.intrinsics.clone(), theta=theta, iterations=100)
+        shared = SharedState(intrinsics=start.intrinsics.to(dev), theta=theta.to(dev), iterations=100)
+        if dev.type == "cuda":
+            torch.cuda.synchronize()
         t0 = time.perf_counter()
-        run_window(backend, buf, 0, n, prob.edges, params, shared, iters, 1)
+        run_window(backend, buf, 0, n, edges, params, shared, iters, 1)
+        if dev.type == "cuda":
+            torch.cuda.synchronize()
         times.append((time.perf_counter() - t0) / iters)
     return 1e3 * statistics.median(times[1:])
 

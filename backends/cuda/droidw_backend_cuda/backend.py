@@ -9,6 +9,15 @@ is device-agnostic and runs on the GPU as is) and replaces
 * ``_similarity_term``: the uncertainty data term and its ∂/∂u map
   (``csrc/similarity.cu``).
 
+Precision.  The linearisation hands the shared solve the *edge form* of E, as the
+CPU backend does: per-edge rows e_k (float32, per pixel) and T_k = [[−Ad(G_ij)ᵀ, 0],
+[I, 0], [0, I_nf]].  The kernel sums H_j = Σ_p w J Jᵀ, g_j = Σ_p w J r and the cost
+in float64 in a fixed order, H = T H_j Tᵀ is formed in float64, and the Schur
+Grams Γ_kl = Σ_p e_k C⁻¹ e_lᵀ are accumulated in float64
+(``LinearSystem.gram_dtype``).  S = B − Σ T_k Γ_kl T_lᵀ cancels most of B in a
+poorly conditioned window, so float32 sums there (the former block form, summed
+with float32 atomics) moved the step by about 4e-4 of its size.
+
 Importing this module is cheap and safe without CUDA: the kernels are built
 only at first use (:mod:`droidw_backend_cuda.build`).
 """
@@ -24,7 +33,7 @@ from droidw_cli.ba.types import BAState, EdgeSet
 from droidw_cli.geometry.lie import adjoint_matrix
 from droidw_cli.geometry.projection import FOCAL_DOF, POSE_DOF, relative_poses
 from droidw_backend_cpu.backend import CpuBackend
-from droidw_backend_cpu.linearize import expand_to_both_poses, scatter_eblocks
+from droidw_backend_cpu.linearize import expand_to_both_poses
 from droidw_backend_cuda import build
 
 #: codes of the kernels' enums (csrc/droidw_ba.h)
@@ -94,14 +103,14 @@ class CudaBackend(CpuBackend):
         inputs.weight = edges.weight.reshape(e, h * w, 2).contiguous()
         if u_map is not None:
             inputs.umap = u_map.contiguous()
-        hess_j, grad_j, erows, cdiag, wvec, cost = k.linearize(cfg, inputs)
-        tmat, hess, grad = expand_to_both_poses(adjoint_matrix(rot, trans), hess_j, grad_j)
+        hess_j, grad_j, erows, cdiag, wvec, cost = k.linearize(cfg, inputs)  # sums in float64
+        # T_k holds float32 values (from the float32 poses); in float64 only so that H = T H_j Tᵀ stays float64
+        tmat, hess, grad = expand_to_both_poses(adjoint_matrix(rot, trans).double(), hess_j, grad_j)
         if params.motion_only:
             return LinearSystem(hess, grad, None, None, None, cost.reshape(()))
-        eblocks = torch.zeros(layout.num_blocks, POSE_DOF, h * w, device=self.device, dtype=torch.float32)
-        scatter_eblocks(eblocks, layout.edge_blocks, tmat, erows)
         assert erows.shape[1] == POSE_DOF + FOCAL_DOF[params.optimize_focal]
-        return LinearSystem(hess, grad, eblocks, cdiag, wvec, cost.reshape(()))
+        return LinearSystem(hess, grad, None, cdiag, wvec, cost.reshape(()), erows=erows, tmat=tmat.float(),
+                            gram_dtype=torch.float64)
 
     def _similarity_term(self, state: BAState, ii: Tensor, jj: Tensor, target: Tensor, omega: Tensor, u: Tensor,
                          params: BAParams) -> tuple[Tensor, Tensor]:

@@ -86,28 +86,65 @@ def _instantiate(name: str) -> BABackend:
     return backend
 
 
-def get_backend(name: str = "auto") -> BABackend:
-    """A ready backend: ``auto`` (CUDA when it works, else CPU), ``cpu``, ``cuda`` or a plugin name.
+@dataclass(frozen=True)
+class BackendChoice:
+    """The backend a name resolved to: ``requested`` (e.g. ``auto``) and why the others were passed over."""
 
-    Choosing a backend that cannot run here raises :class:`UserError` naming the
-    CPU backend as the alternative.
+    backend: BABackend
+    requested: str
+    passed_over: tuple[str, ...] = ()
+
+    @property
+    def name(self) -> str:
+        return self.backend.name
+
+    def describe(self) -> str:
+        """One line, e.g. ``BA backend: cpu (auto; cuda: no CUDA device)``."""
+        if self.requested != "auto":
+            return f"BA backend: {self.name}"
+        return f"BA backend: {self.name} ({'; '.join(('auto',) + self.passed_over)})"
+
+
+def resolve_backend(name: str = "auto") -> BackendChoice:
+    """A ready backend and how it was chosen.
+
+    ``auto`` tries :data:`AUTO_ORDER` (CUDA first): the first backend that is
+    available here *and* starts (a CUDA backend builds or loads its kernels now)
+    wins; each one passed over is listed with its reason.  Any other name must
+    be available and start, else :class:`UserError` names the CPU backend as
+    the alternative.
     """
     if name == "auto":
+        passed: list[str] = []
         for candidate in AUTO_ORDER:
+            if candidate not in _targets():
+                passed.append(f"{candidate}: not installed")
+                continue
             info = backend_info(candidate)
             if not info.available:
+                passed.append(f"{candidate}: {info.reason}")
                 continue
             try:
-                return _instantiate(candidate)
-            except Exception:  # e.g. the CUDA build failed: fall back to the next one
-                continue
-        raise UserError("no BA backend can run here (the cpu backend should always work: is droidw installed?)")
+                return BackendChoice(_instantiate(candidate), "auto", tuple(passed))
+            except Exception as exc:  # e.g. the CUDA build failed: fall back to the next one
+                passed.append(f"{candidate}: failed to start ({type(exc).__name__}: {exc})")
+        raise UserError("no BA backend can run here (the cpu backend should always work: is droidw installed?); "
+                        + "; ".join(passed))
     info = backend_info(name)
     if not info.available:
         raise UserError(f"the '{name}' BA backend cannot run here ({info.reason}); "
                         f"use --backend cpu (the CPU backend runs everywhere)")
     try:
-        return _instantiate(name)
+        return BackendChoice(_instantiate(name), name)
     except Exception as exc:
         raise UserError(f"the '{name}' BA backend failed to start ({exc}); "
                         f"use --backend cpu (the CPU backend runs everywhere)") from exc
+
+
+def get_backend(name: str = "auto") -> BABackend:
+    """A ready backend: ``auto`` (CUDA when it works, else CPU), ``cpu``, ``cuda`` or a plugin name.
+
+    Choosing a backend that cannot run here raises :class:`UserError` naming the
+    CPU backend as the alternative (see :func:`resolve_backend`).
+    """
+    return resolve_backend(name).backend

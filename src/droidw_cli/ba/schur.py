@@ -123,6 +123,11 @@ class LinearSystem:
         cost: 0-d tensor, Σ w r².
         erows: (E, 6 + nf, HW) per-edge E rows Σ w [J_jj; J_f] ∂p/∂d, or None.
         tmat: (E, K, 6 + nf) T_k with [J_ii; J_jj; J_f] = T_k [J_jj; J_f] (with ``erows``).
+        gram_dtype: dtype in which the edge form's Schur Grams Γ_kl = Σ_p e_k C⁻¹ e_lᵀ and
+            Σ_p e_k C⁻¹ w are accumulated; None = ``erows``' own dtype.  The rows e_k C^-1/2
+            are formed per pixel in float32 either way; float64 accumulation (the CUDA
+            backend) keeps the B − E C⁻¹ Eᵀ cancellation of a poorly conditioned window
+            from amplifying float32 sums into the step.
     """
 
     hess: Tensor
@@ -133,6 +138,7 @@ class LinearSystem:
     cost: Tensor
     erows: Tensor | None = None
     tmat: Tensor | None = None
+    gram_dtype: torch.dtype | None = None
 
     @property
     def has_depth(self) -> bool:
@@ -211,9 +217,11 @@ def _edge_form_schur(s_blocks: Tensor, rhs: Tensor, lin: LinearSystem, ii: Tenso
     order, groups = edge_groups(ii, cinv.shape[0])
     root = cinv.sqrt()
     wroot = wvec * root
+    gram_dtype = lin.gram_dtype or lin.erows.dtype
+    itemsize = torch.empty((), dtype=gram_dtype).element_size()
     batches = []  # (D, first edge, frames): each group in batches of frames whose rows fit SCHUR_BATCH_BYTES
     for d, start, count in groups:
-        per_frame = (d * kj + 2) * hw * lin.erows.element_size()
+        per_frame = (d * kj + 2) * hw * itemsize
         step = max(1, SCHUR_BATCH_BYTES // per_frame)
         batches += [(d, start + f * d, min(step, count - f)) for f in range(0, count, step)]
     num_active = int(round((s_blocks.shape[0] - 1) ** 0.5))
@@ -223,7 +231,7 @@ def _edge_form_schur(s_blocks: Tensor, rhs: Tensor, lin: LinearSystem, ii: Tenso
         frames = ii[sel[::d]]  # (count,) the depth frame of each group member
         m = d * kj
         rows = m + 1 + (m + 1) % 2
-        a = torch.empty(count, rows, hw, dtype=lin.erows.dtype, device=lin.erows.device)
+        a = torch.empty(count, rows, hw, dtype=gram_dtype, device=lin.erows.device)
         # e_k C^-1/2; index_select, not x[sel]: advanced indexing gathers element by element, far slower on CPU
         torch.mul(lin.erows.index_select(0, sel).view(count, d, kj, hw),
                   root.index_select(0, frames).view(count, 1, 1, hw), out=a[:, :m].view(count, d, kj, hw))

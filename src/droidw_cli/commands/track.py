@@ -26,7 +26,7 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
 
     import torch
 
-    from droidw_cli.ba.registry import get_backend
+    from droidw_cli.ba.registry import resolve_backend
     from droidw_cli.config import load_config
     from droidw_cli.correspondence import get_correspondence_source
     from droidw_cli.export.run_files import run_info, write_run
@@ -50,12 +50,16 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
         calibration = None
     else:
         calibration = load_calibration(calib, image_size=source.size)
-    ba_backend = get_backend(backend)
+    choice = resolve_backend(backend)
+    ba_backend = choice.backend
+    if choice.requested == "auto":  # say which one auto picked, and why not the others
+        click.echo(f"droidw: {choice.describe()}", err=True)
     corr = get_correspondence_source(cfg.correspondence)
     features = get_feature_extractor(cfg.features.name) if cfg.uncertainty.enable else None
     result = Tracker(cfg, ba_backend, corr, features, progress=progress).run(source, calibration)
     info = run_info(result, cfg.to_dict(), ba_backend.name, str(input_path), peak_memory_mb())
     info["calibration"]["source"] = "estimated" if result.calibration_estimated else (str(calib) if calib else "input")
+    info["backend_choice"] = {"requested": choice.requested, "passed_over": list(choice.passed_over)}
     paths = write_run(out_dir, result, info)
     return result, paths
 
@@ -67,7 +71,9 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
 @click.option("--calib", default=None, metavar="FILE|auto",
               help="Calibration file (fx fy cx cy [k1 k2 p1 p2 [k3]] or YAML), or 'auto' to estimate the focal "
                    "length.  Default: the calibration found with the input (calib.txt, EuRoC sensor.yaml), else auto.")
-@click.option("--backend", default="auto", show_default=True, help="BA backend: auto, cpu, cuda (see `droidw backends`).")
+@click.option("--backend", default="auto", show_default=True,
+              help="BA backend: auto (cuda when it is available and builds, else cpu; stderr and run.json "
+                   "say which), cpu, cuda (see `droidw backends`).")
 @config_option
 @set_option
 @click.option("--stride", type=int, default=None, help="Use every N-th frame.")

@@ -71,12 +71,13 @@ def transfer_disparity(pose_src: Tensor, disp_src: Tensor, pose_dst: Tensor, int
     """disp_src (h, w) forward-warped into the camera ``pose_dst`` (nearest surface wins)."""
     h, w = disp_src.shape
     poses = torch.stack([pose_src, pose_dst])
-    idx0, idx1 = torch.zeros(1, dtype=torch.long), torch.ones(1, dtype=torch.long)
+    idx0 = torch.zeros(1, dtype=torch.long, device=disp_src.device)
+    idx1 = torch.ones(1, dtype=torch.long, device=disp_src.device)
     proj = project_edges(poses, torch.stack([disp_src, disp_src]), intrinsics, idx0, idx1, min_depth)
     x, y = proj.coords[0, 0].round().long(), proj.coords[0, 1].round().long()
     new_disp = proj.disp[0] * proj.z[0]  # (P, d) lands at depth Z/d in the new frame
     ok = proj.valid[0] & (x >= 0) & (x < w) & (y >= 0) & (y < h)
-    out = torch.full((h * w,), -1.0, dtype=disp_src.dtype)
+    out = torch.full((h * w,), -1.0, dtype=disp_src.dtype, device=disp_src.device)
     out.scatter_reduce_(0, (y * w + x)[ok], new_disp[ok], reduce="amax")
     hit = out > 0
     fill = out[hit].median() if bool(hit.any()) else disp_src.median()

@@ -38,21 +38,22 @@ def evidence_maps(backend: BABackend, state: BAState, edges: EdgeSet, min_depth:
     edges' frames ii): residual = log(1 + Σ r·v / max(Σ v, 1)) with v = valid ∧
     |i − j| ≥ WIDE_GAP, doubt = 1 − Σ w_x / max(#edges, 1) where the frame has
     edges.  r = ‖p*_ij − p_ij‖ is computed per component pair with ``hypot``
-    (a norm over a last axis of length 2 is very slow on CPU).
+    (a norm over a last axis of length 2 is very slow on CPU).  Everything stays on
+    the device of the backend's reprojection, which must be that of the edges.
     """
     n = state.num_frames
     h, w = state.grid
     ii = edges.ii.long()
     coords, valid = backend.reproject(state, ii, edges.jj, min_depth)
-    coords, valid = coords.cpu(), valid.cpu()
+    dev = coords.device
     target = edges.target.to(coords)
     wide = (ii - edges.jj.long()).abs() >= WIDE_GAP
     v = (valid & wide[:, None, None]).float()  # (valid may be a view of a cached projection: no in-place)
     r = torch.hypot(target[..., 0] - coords[..., 0], target[..., 1] - coords[..., 1]).mul_(v)
-    count = torch.zeros(n, h, w).index_add_(0, ii, v).clamp_min_(1.0)
-    residual = torch.log1p(torch.zeros(n, h, w).index_add_(0, ii, r).div_(count))
+    count = torch.zeros(n, h, w, device=dev).index_add_(0, ii, v).clamp_min_(1.0)
+    residual = torch.log1p(torch.zeros(n, h, w, device=dev).index_add_(0, ii, r).div_(count))
     per_frame = torch.bincount(ii, minlength=n).float()  # edges per frame (the same for all its pixels)
-    confidence = torch.zeros(n, h, w).index_add_(0, ii, edges.weight[..., 0].to(coords))
+    confidence = torch.zeros(n, h, w, device=dev).index_add_(0, ii, edges.weight[..., 0].to(coords))
     confidence.div_(per_frame.clamp_min(1.0)[:, None, None])
     doubt = torch.where((per_frame > 0)[:, None, None], 1.0 - confidence, torch.zeros_like(confidence))
     return torch.stack([residual, doubt], 1)

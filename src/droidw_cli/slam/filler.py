@@ -119,13 +119,14 @@ class TrajectoryFiller:
                 if anchor in position:
                     self._solve(position[anchor])
         poses = {f: buf.poses[k].clone() for f, k in position.items()}
+        ident = IDENTITY.to(buf.device, copy=True)
         for anchor, frames in self._pending.items():  # never initialised: everything at its anchor
             for p in frames:
-                self._relative[p.frame_index] = (anchor, IDENTITY.clone())
+                self._relative[p.frame_index] = (anchor, ident.clone())
         self._pending.clear()
         for f in sorted(self._relative):  # anchors precede their frames: one pass in frame order
             anchor, rel = self._relative[f]
-            poses[f] = compose(rel, poses.get(anchor, IDENTITY))
+            poses[f] = compose(rel, poses.get(anchor, ident))
         return poses
 
     # ---------------------------------------------------------------- solving
@@ -140,7 +141,7 @@ class TrajectoryFiller:
         pose_a = buf.poses[k]
         if k + 1 < len(buf):
             ta, tb = buf.timestamps[k], buf.timestamps[k + 1]
-            alpha = ((ts - ta) / max(tb - ta, 1e-9)).clamp(0, 1).float()
+            alpha = ((ts - ta) / max(tb - ta, 1e-9)).clamp(0, 1).float().to(pose_a.device)
             init = interpolate(pose_a.expand(len(frames), 7), buf.poses[k + 1].expand(len(frames), 7), alpha)
         else:
             init = pose_a.expand(len(frames), 7).clone()
@@ -157,7 +158,7 @@ class TrajectoryFiller:
         fe, buf = self.fe, self.fe.buffer
         mine = [(i, j) for (i, j) in fe.cache.pairs() if i == k]
         if not mine:
-            return torch.ones(buf.grid)
+            return torch.ones(buf.grid, device=buf.device)
         conf = torch.stack([fe.cache.targets[p][1][..., 0].float() for p in mine]).mean(0)
         unc = fe.params.uncertainty
         theta = fe.shared.theta
@@ -179,12 +180,13 @@ class TrajectoryFiller:
         m, na = len(init), len(anchors)
         h, w = buf.grid
         corr = fe.correspondence
-        target = torch.stack([corr.quick_target(grey(fe.images[k]), img) for k in anchors for img in images]).float()
+        target = torch.stack([corr.quick_target(grey(fe.images[k]), img)
+                              for k in anchors for img in images]).float().to(buf.device)
         inside = ((target[..., 0] >= 0) & (target[..., 0] <= w - 1) & (target[..., 1] >= 0) & (target[..., 1] <= h - 1))
         base = torch.stack([self.anchor_weight(k) for k in anchors]).repeat_interleave(m, 0) * inside.float()
-        ii = torch.arange(na).repeat_interleave(m)
-        jj = na + torch.arange(m).repeat(na)
-        disps = torch.cat([buf.disps[anchors], torch.ones(m, h, w)])
+        ii = torch.arange(na, device=buf.device).repeat_interleave(m)
+        jj = na + torch.arange(m, device=buf.device).repeat(na)
+        disps = torch.cat([buf.disps[anchors], torch.ones(m, h, w, device=buf.device)])
         state = BAState(torch.cat([buf.poses[anchors], init]), disps, fe.shared.intrinsics.clone())
         params = dataclasses.replace(fe.params, t0=na, motion_only=True, optimize_focal="none",
                                      uncertainty=dataclasses.replace(fe.params.uncertainty, enable=False))

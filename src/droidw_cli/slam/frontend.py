@@ -25,6 +25,11 @@ Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distanc
   (:mod:`droidw_cli.dynamics.epipolar`).  The learned uncertainty reads the
   map, so it cannot find movers that the map was built on: during
   initialisation, or when a mover walks in.
+
+The keyframe buffer, the edge cache, θ and the intrinsics live on the BA
+backend's device (``backend.device``); images and DIS flow stay on the host,
+and each edge's target and confidence are copied to the device once, when
+they are cached.
 """
 
 from __future__ import annotations
@@ -59,11 +64,13 @@ class Frontend:
         self.params = params
         self.backend = backend
         self.correspondence = correspondence
-        self.buffer = KeyframeBuffer(grid, feature_channels, torch.float16 if cfg.features.half else torch.float32)
-        self.cache = graph.EdgeCache()
+        dev = backend.device
+        self.buffer = KeyframeBuffer(grid, feature_channels, torch.float16 if cfg.features.half else torch.float32,
+                                     device=dev)
+        self.cache = graph.EdgeCache(device=dev)
         extra = EVIDENCE_CHANNELS if params.uncertainty.evidence else 0
-        theta = torch.zeros(feature_channels + extra + 1) if feature_channels else None
-        self.shared = SharedState(intrinsics8.clone().float(), theta)
+        theta = torch.zeros(feature_channels + extra + 1, device=dev) if feature_channels else None
+        self.shared = SharedState(intrinsics8.clone().float().to(dev), theta)
         self.images: dict[int, np.ndarray] = {}
         self.initialised = False
         self.on_remove = None  # called with a keyframe's index just before keyframe removal drops it
@@ -76,18 +83,18 @@ class Frontend:
         self._epipolar: dict[tuple[int, int], tuple[np.ndarray, torch.Tensor]] = {}
         h, w = grid
         ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32), indexing="ij")
-        self.grid_coords = torch.stack([xs, ys], -1)
+        self.grid_coords = torch.stack([xs, ys], -1)  # on the host, with the flow
 
     # ------------------------------------------------------------------ helpers
     def _induced_flow(self, pairs: list[tuple[int, int]]) -> tuple[torch.Tensor, torch.Tensor]:
-        """Grid-pixel flow (E, h, w, 2) induced by the current poses/depths, and validity."""
-        ii = torch.tensor([p[0] for p in pairs])
-        jj = torch.tensor([p[1] for p in pairs])
-        lo = int(min(ii.min(), jj.min()))
-        hi = int(max(ii.max(), jj.max())) + 1
+        """Grid-pixel flow (E, h, w, 2) induced by the current poses/depths, and validity (on the host)."""
+        ii = torch.tensor([p[0] for p in pairs], device=self.buffer.device)
+        jj = torch.tensor([p[1] for p in pairs], device=self.buffer.device)
+        lo = min(min(p) for p in pairs)
+        hi = max(max(p) for p in pairs) + 1
         state = window_state(self.buffer, lo, hi, self.shared, with_features=False)
         coords, valid = self.backend.reproject(state, ii - lo, jj - lo, self.params.min_depth)
-        return coords - self.grid_coords, valid
+        return coords.cpu() - self.grid_coords, valid.cpu()
 
     @staticmethod
     def full_res_flow(flow_grid: torch.Tensor, valid: torch.Tensor, size: tuple[int, int]) -> np.ndarray:
@@ -157,7 +164,8 @@ class Frontend:
         """Frame distances d(i, j) in grid px under the current poses and disparities."""
         buf = self.buffer
         return frame_distance(buf.poses[:len(buf)], buf.disps[:len(buf)], self.shared.intrinsics,
-                              torch.tensor(ii, dtype=torch.long), torch.tensor(jj, dtype=torch.long),
+                              torch.tensor(ii, dtype=torch.long, device=buf.device),
+                              torch.tensor(jj, dtype=torch.long, device=buf.device),
                               self.fcfg.beta, self.params.min_depth)
 
     # ------------------------------------------------------------------ public
@@ -256,7 +264,7 @@ class Frontend:
         if not (unc.enable and unc.evidence) or self.buffer.features is None:
             return None
         if n < 2 or len(self.cache) == 0:
-            return torch.zeros(n, EVIDENCE_CHANNELS, *self.buffer.grid)
+            return torch.zeros(n, EVIDENCE_CHANNELS, *self.buffer.grid, device=self.buffer.device)
         state = window_state(self.buffer, 0, n, self.shared, with_features=False)
         return evidence_maps(self.backend, state, self.cache.edge_set(self.cache.pairs()), self.params.min_depth)
 

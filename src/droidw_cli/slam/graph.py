@@ -4,7 +4,8 @@ Edges are directed: pixels of keyframe i are matched into keyframe j.  Every
 pair is added in both directions.  Correspondence targets are computed once
 per edge by the correspondence source and cached at 1/8 resolution (targets
 in float32, confidences in float16), so the final global BA can reuse them
-without keeping images.
+without keeping images.  The cache lives on the BA backend's device: each
+edge's target and confidence are copied there once, when they are stored.
 """
 
 from __future__ import annotations
@@ -23,11 +24,13 @@ class EdgeCache:
 
     ``born`` holds the BA iteration count at which each edge was added, so
     that the window BA can retire edges after ``max_age`` iterations (the
-    global BA still uses them all).
+    global BA still uses them all).  Targets, confidences and the index
+    tensors of :meth:`edge_set` are on ``device``.
     """
 
     targets: dict[tuple[int, int], tuple[Tensor, Tensor]] = field(default_factory=dict)
     born: dict[tuple[int, int], int] = field(default_factory=dict)
+    device: torch.device = field(default_factory=lambda: torch.device("cpu"))
 
     def __contains__(self, key: tuple[int, int]) -> bool:
         return key in self.targets
@@ -36,7 +39,8 @@ class EdgeCache:
         return len(self.targets)
 
     def put(self, i: int, j: int, target: Tensor, weight: Tensor, born: int | None = None) -> None:
-        self.targets[(i, j)] = (target.to(torch.float32), weight.to(torch.float16))
+        self.targets[(i, j)] = (target.to(device=self.device, dtype=torch.float32),
+                                weight.to(device=self.device, dtype=torch.float16))
         if born is not None or (i, j) not in self.born:
             self.born[(i, j)] = 0 if born is None else born
 
@@ -57,8 +61,8 @@ class EdgeCache:
 
     def edge_set(self, pairs: list[tuple[int, int]], offset: int = 0) -> EdgeSet:
         """Stack cached edges into an :class:`EdgeSet` with indices shifted by ``-offset``."""
-        ii = torch.tensor([p[0] - offset for p in pairs], dtype=torch.long)
-        jj = torch.tensor([p[1] - offset for p in pairs], dtype=torch.long)
+        ii = torch.tensor([p[0] - offset for p in pairs], dtype=torch.long, device=self.device)
+        jj = torch.tensor([p[1] - offset for p in pairs], dtype=torch.long, device=self.device)
         target = torch.stack([self.targets[p][0] for p in pairs]).float()
         weight = torch.stack([self.targets[p][1] for p in pairs]).float()
         return EdgeSet(ii, jj, target, weight)
@@ -88,15 +92,17 @@ def select_proximity(candidates: list[tuple[int, int]], distance: Tensor, thresh
     distances.  A pair is suppressed when it lies within ``nms`` keyframes of
     an existing or already chosen pair, i.e. |i − i'| ≤ nms and |j − j'| ≤ nms
     (in either orientation).  At most ``limit`` pairs; returned both directions.
+    ``distance`` may be on any device: it is read back once.
     """
     taken = {(min(p), max(p)) for p in existing}
+    values = distance.tolist()
 
     def suppressed(i: int, j: int) -> bool:
         return any(abs(i - a) <= nms and abs(j - b) <= nms for a, b in taken)
 
     out: list[tuple[int, int]] = []
     for idx in torch.argsort(distance).tolist():
-        if float(distance[idx]) >= thresh or len(out) >= 2 * limit:
+        if values[idx] >= thresh or len(out) >= 2 * limit:
             break
         i, j = sorted(candidates[idx])
         if suppressed(i, j):

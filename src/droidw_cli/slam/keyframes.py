@@ -5,6 +5,10 @@ Per keyframe t it keeps the source frame index and timestamp, the pose G_t
 (C, h, w, float16), an optional prior disparity D_t, and an RGB thumbnail.
 Nothing at the working resolution is kept here, so memory grows only with
 the number of keyframes.
+
+The tensors live on ``device``, the BA backend's (:attr:`BABackend.device`),
+from the start: a keyframe's pose, disparity, features and prior are copied
+there once, in :meth:`KeyframeBuffer.append`; the thumbnails stay on the host.
 """
 
 from __future__ import annotations
@@ -17,15 +21,19 @@ from torch import Tensor
 class KeyframeBuffer:
     """Growable storage for keyframe state (capacity doubles when full)."""
 
-    def __init__(self, grid: tuple[int, int], feature_channels: int = 0, feature_dtype=torch.float16, capacity: int = 64):
+    def __init__(self, grid: tuple[int, int], feature_channels: int = 0, feature_dtype=torch.float16,
+                 capacity: int = 64, device: torch.device | str = "cpu"):
         self.grid = grid
         self.count = 0
+        self.device = torch.device(device)
         h, w = grid
-        self.poses = torch.zeros(capacity, 7)
+        dev = self.device
+        self.poses = torch.zeros(capacity, 7, device=dev)
         self.poses[:, 6] = 1.0
-        self.disps = torch.ones(capacity, h, w)
-        self.depth_prior = torch.zeros(capacity, h, w)
-        self.features = torch.zeros(capacity, feature_channels, h, w, dtype=feature_dtype) if feature_channels else None
+        self.disps = torch.ones(capacity, h, w, device=dev)
+        self.depth_prior = torch.zeros(capacity, h, w, device=dev)
+        self.features = (torch.zeros(capacity, feature_channels, h, w, dtype=feature_dtype, device=dev)
+                         if feature_channels else None)
         self.frame_index: list[int] = []
         self.timestamps: list[float] = []
         self.thumbnails: list[np.ndarray] = []
@@ -56,9 +64,9 @@ class KeyframeBuffer:
         self.poses[k] = pose
         self.disps[k] = disp
         if features is not None and self.features is not None:
-            self.features[k] = features.to(self.features.dtype)
+            self.features[k] = features.to(device=self.device, dtype=self.features.dtype)
         if depth_prior is not None:
-            self.depth_prior[k] = depth_prior
+            self.depth_prior[k] = depth_prior.to(self.device)
             self.has_prior = True
         self.frame_index.append(int(frame_index))
         self.timestamps.append(float(timestamp))
@@ -74,7 +82,8 @@ class KeyframeBuffer:
         tensors = [self.poses, self.disps, self.depth_prior] + ([self.features] if self.features is not None else [])
         for t in tensors:
             t[k:n - 1] = t[k + 1:n].clone()
-        self.poses[n - 1] = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
+        self.poses[n - 1] = 0.0
+        self.poses[n - 1, 6] = 1.0
         self.disps[n - 1] = 1.0
         for seq in (self.frame_index, self.timestamps, self.thumbnails):
             del seq[k]

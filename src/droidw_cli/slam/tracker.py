@@ -78,12 +78,12 @@ def _source_calibration(k_work: np.ndarray, preparer: FramePreparer) -> Calibrat
 def _confidence(frontend: Frontend) -> torch.Tensor:
     """Per-keyframe mean confidence of its outgoing edges, (K, h, w)."""
     buf = frontend.buffer
-    conf = torch.zeros(len(buf), *buf.grid)
+    conf = torch.zeros(len(buf), *buf.grid, device=buf.device)
     count = torch.zeros(len(buf))
     for (i, _), (_, w) in frontend.cache.targets.items():
         conf[i] += w[..., 0].float()
         count[i] += 1
-    return conf / count.clamp(min=1)[:, None, None]
+    return conf / count.clamp(min=1).to(conf.device)[:, None, None]
 
 
 def _keyframe_uncertainty(frontend: Frontend, evidence: torch.Tensor | None) -> torch.Tensor | None:
@@ -213,14 +213,14 @@ class Tracker:
             collected += [str(w.message) for w in caught if not issubclass(w.category, DeprecationWarning)]
 
         ident = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
-        w2c = torch.stack([poses_w2c.get(idx, ident) for idx, _ in frames])
+        w2c = torch.stack([poses_w2c.get(idx, ident).cpu() for idx, _ in frames])
         buf = fe.buffer
         n_kf = len(buf)
-        k_work = unscale_intrinsics(fe.shared.intrinsics.numpy().astype(np.float64), BA_SCALE)
+        k_work = unscale_intrinsics(fe.shared.intrinsics.cpu().numpy().astype(np.float64), BA_SCALE)
         feats_np = theta = None
         if unc is not None:
-            feats_np = buf.features[:n_kf].to(torch.float16).numpy()
-            theta = fe.shared.theta.numpy().copy()
+            feats_np = buf.features[:n_kf].to(torch.float16).cpu().numpy()
+            theta = fe.shared.theta.cpu().numpy().copy()
         wall = time.perf_counter() - t_start
         return TrackResult(
             timestamps=np.array([t for _, t in frames], dtype=np.float64),
@@ -230,12 +230,12 @@ class Tracker:
             work_size=hw,
             kf_index=np.array(buf.frame_index, dtype=np.int64),
             kf_timestamps=np.array(buf.timestamps, dtype=np.float64),
-            kf_poses_c2w=to_matrix(invert(buf.poses[:n_kf])) if n_kf else np.zeros((0, 4, 4)),
-            kf_disps=buf.disps[:n_kf].numpy().copy(),
+            kf_poses_c2w=to_matrix(invert(buf.poses[:n_kf].cpu())) if n_kf else np.zeros((0, 4, 4)),
+            kf_disps=buf.disps[:n_kf].cpu().numpy().copy(),
             kf_images=np.stack(buf.thumbnails) if n_kf else np.zeros((0, 1, 1, 3), np.uint8),
-            kf_uncertainty=None if unc is None else unc.numpy(),
+            kf_uncertainty=None if unc is None else unc.cpu().numpy(),
             kf_features=feats_np,
-            kf_confidence=_confidence(fe).numpy(),
+            kf_confidence=_confidence(fe).cpu().numpy(),
             theta=theta,
             initialised=fe.initialised,
             calibration_estimated=auto,

@@ -54,7 +54,9 @@ struct SimilarityInputs {
   torch::Tensor rel, disps, ii, jj, omega, features, u, target;  // target (K, HW, 2), used when geo_sigma > 0
 };
 
-// Returns {hess_j (E, KJ, KJ), grad_j (E, KJ), erows (E, KJ, HW) or empty, cdiag (N, HW), wvec (N, HW), cost (1)}.
+// Returns {hess_j (E, KJ, KJ) float64, grad_j (E, KJ) float64, erows (E, KJ, HW) float32 or undefined,
+//          cdiag (N, HW) float32 or undefined, wvec (N, HW) float32 or undefined, cost (1) float64};
+// the sums over pixels are float64 in a fixed order (linearize.cu).
 std::vector<torch::Tensor> linearize_cuda(const LinearizeConfig& cfg, const LinearizeInputs& in);
 
 // Returns {grad (N, HW) = d(gamma_data E_sim)/du, loss (1)}.

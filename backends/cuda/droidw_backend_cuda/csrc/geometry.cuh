@@ -82,7 +82,9 @@ __device__ __forceinline__ float weight_factor(float u, int mode) {
   return 1.0f;
 }
 
-__device__ __forceinline__ float warp_sum(float v) {
+// Tree sum over a warp (lane 0 holds the total); the order is fixed, so the result is reproducible.
+template <typename T>
+__device__ __forceinline__ T warp_sum(T v) {
   for (int off = kWarp / 2; off > 0; off >>= 1) v += __shfl_down_sync(kFullMask, v, off);
   return v;
 }
