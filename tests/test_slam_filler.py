@@ -80,23 +80,19 @@ def test_removed_keyframe_becomes_a_frame_of_its_predecessor(walk):
     """Keyframe removal keeps the chain: a later rigid motion of the remaining keyframes carries every frame."""
     frames, _ = walk
     mid = (A + B) // 2
-    fe, cfg = _frontend(walk, [A, mid, B])
-    filler = TrajectoryFiller(fe, cfg.filler)
-    for k in range(A + 1, mid):
-        filler.add_frame(k, k / 30.0, A, frames[k][0])
-    for k in range(mid + 1, B):
-        filler.add_frame(k, k / 30.0, mid, frames[k][0])
-    filler.keyframe_removed(1)  # what the frontend calls just before dropping keyframe 1
-    fe._remove(1)
-    before = filler.finish()
-    fe2, _ = _frontend(walk, [A, mid, B])
-    filler2 = TrajectoryFiller(fe2, cfg.filler)
-    for k in range(A + 1, mid):
-        filler2.add_frame(k, k / 30.0, A, frames[k][0])
-    for k in range(mid + 1, B):
-        filler2.add_frame(k, k / 30.0, mid, frames[k][0])
-    filler2.keyframe_removed(1)
-    fe2._remove(1)
+
+    def removed_middle():
+        fe, cfg = _frontend(walk, [A, mid, B])
+        filler = TrajectoryFiller(fe, cfg.filler)
+        for k in range(A + 1, B):
+            if k != mid:
+                filler.add_frame(k, k / 30.0, A if k < mid else mid, frames[k][0])
+        filler.keyframe_removed(1)  # what the frontend calls just before dropping keyframe 1
+        fe._remove(1)
+        return fe, filler
+
+    before = removed_middle()[1].finish()
+    fe2, filler2 = removed_middle()
     shift = torch.tensor([0.3, -0.1, 0.2, 0.0, 0.0, 0.0, 1.0])  # the world moves: G_t → G_t S⁻¹ for all
     s_inv = pp.SE3(shift).Inv().tensor()
     fe2.buffer.poses[:2] = compose(fe2.buffer.poses[:2], s_inv.expand(2, 7))
