@@ -11,20 +11,10 @@ import pytest
 
 from droidw_cli.batch.manifest import ManifestError, load_manifest
 from droidw_cli.batch.summary import format_markdown, mean_row
-from droidw_cli.cli import main
+from cli_run import run
 
 # small, quick clips: 160x120, 20 frames at 10 fps (enough motion for a few keyframes)
 TRACK_SET = {"io.target_area": 19200, "motion_filter.thresh": 1.0, "frontend.keyframe_thresh": 1.0}
-
-
-def run(argv, capsys) -> tuple[int, str, str]:
-    try:
-        main(argv)
-        code = 0
-    except SystemExit as exc:
-        code = exc.code
-    cap = capsys.readouterr()
-    return code, cap.out, cap.err
 
 
 @pytest.fixture(scope="module")

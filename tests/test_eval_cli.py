@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from droidw_cli.cli import main
+from cli_run import run
 from droidw_cli.eval import evaluate_ate, evaluate_rpe
 from droidw_cli.io.trajectory import Trajectory, read_trajectory, write_trajectory
 
@@ -36,16 +36,6 @@ def files(tmp_path):
     write_trajectory(tmp_path / "gt.txt", gt, "tum")
     write_trajectory(tmp_path / "est.txt", est, "tum")
     return tmp_path
-
-
-def run(argv, capsys) -> tuple[int, str, str]:
-    try:
-        main(argv)
-        code = 0
-    except SystemExit as exc:
-        code = exc.code
-    cap = capsys.readouterr()
-    return code, cap.out, cap.err
 
 
 def expected(files, align="sim3"):

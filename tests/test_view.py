@@ -8,17 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from droidw_cli.cli import main
-
-
-def run(argv, capsys) -> tuple[int, str, str]:
-    try:
-        main(argv)
-        code = 0
-    except SystemExit as exc:
-        code = exc.code
-    cap = capsys.readouterr()
-    return code, cap.out, cap.err
+from cli_run import run
 
 
 @pytest.fixture(scope="module")
