@@ -117,3 +117,21 @@ def test_uninitialised_frames_stay_at_their_keyframe(walk):
     poses = filler.finish()
     for k in range(A, A + 6):
         assert torch.allclose(poses[k], frames[A][2], atol=1e-5)
+
+
+def test_a_later_correction_between_the_keyframes_is_spread_over_the_gap(walk):
+    """When the BA moves b relative to a after the gap was solved, a frame follows both: the blend by α."""
+    frames, _ = walk
+    fe, cfg = _frontend(walk, [A, B])
+    filler = TrajectoryFiller(fe, cfg.filler)
+    for k in range(A + 1, B):
+        filler.add_frame(k, k / 30.0, A, frames[k][0])
+    filler._solve(0)
+    before = filler.finish()
+    step = torch.tensor([0.0, 0.0, 0.12, 0.0, 0.0, 0.0, 1.0])  # b moves 12 cm along its optical axis
+    fe.buffer.poses[1] = compose(step, fe.buffer.poses[1])
+    after = filler.finish()
+    for k in range(A + 1, B):
+        alpha = (k - A) / (B - A)
+        moved = float((_centre(after[k]) - _centre(before[k])).norm())
+        assert abs(moved - alpha * 0.12) < 0.01, (k, moved, alpha)

@@ -120,10 +120,34 @@ class FrontendConfig:
 
 @dataclass(frozen=True)
 class BackendConfig:
-    """Final global BA over all keyframes, on every edge the frontend matched."""
+    """Global BA with proximity (loop) edges over the newest ``horizon`` keyframes
+    (:mod:`droidw_cli.slam.backend`; flows in grid px).
+
+    Proximity pairs: |i − j| > ``radius``, frame distance under ``thresh``,
+    non-maximum suppression over ``nms`` keyframes, at most ``max_new`` per run.
+    It runs every ``every`` new keyframes (``periodic_iters`` iterations; 0 =
+    only at the end) and once at the end (``iters``).  Keyframes older than the
+    horizon keep their poses and drop their edges and images.
+    """
 
     enable: bool = True
     iters: int = 12
+    thresh: float = 25.0  # grid px
+    radius: int = 1
+    nms: int = 5
+    max_new: int = 32
+    every: int = 20
+    periodic_iters: int = 4
+    horizon: int = 200
+    image_quality: int = 95
+
+    def __post_init__(self) -> None:
+        if self.horizon < 3:
+            raise ValueError(f"backend.horizon must be >= 3 keyframes, got {self.horizon}")
+        if not 1 <= self.image_quality <= 100:
+            raise ValueError(f"backend.image_quality must be in 1..100, got {self.image_quality}")
+        if self.every < 0 or self.periodic_iters < 0 or self.iters < 0 or self.max_new < 0:
+            raise ValueError("backend.every, periodic_iters, iters and max_new must be >= 0")
 
 
 @dataclass(frozen=True)

@@ -1,33 +1,148 @@
-"""The backend: one global BA over all keyframes after the frontend is done.
+"""The backend: global BA with proximity (loop) edges over the keyframe graph, bounded.
 
-It reuses every edge the frontend matched (their targets are cached at 1/8
-resolution, so no image is needed): radius and proximity edges of every
-window, now optimised jointly with frame 0 as the only fixed pose.
-θ stays frozen (DROID-W: "θ is frozen during the final global BA").
+DROID-SLAM's backend adds, over the whole keyframe graph, the pairs (i, j)
+with |i − j| > ``radius`` whose frame distance d(i, j) (:mod:`droidw_cli.slam.distance`)
+is under ``thresh`` = 25 grid px, closest first, with non-maximum suppression
+over ``nms`` = 5 keyframes against every edge already in the graph (so the
+frontend's own radius and proximity edges suppress their neighbourhood, and
+what is left are revisits: loops).  Their correspondences start from the
+flow that the current poses and depths induce.  Then a BA over all the edges,
+θ frozen (DROID-W: "θ is frozen during the final global BA").
+
+Bounded: the problem covers only the newest ``horizon`` keyframes, [lo, n).
+Older keyframes keep their poses and leave the problem for good: their
+edges and stored images are dropped (:meth:`GlobalBackend.run` reports
+``lo`` so that the tracker can archive them).  A long video therefore builds
+a sequence of overlapping bounded problems, never one that grows with it:
+every ``every`` new keyframes during tracking (``periodic_iters``
+iterations), and once at the end (``iters``).
+
+The images of the keyframes in the problem are kept JPEG-encoded at the
+working resolution (``image_quality``), about a tenth of their raw size.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
+import cv2
+import numpy as np
 import torch
 
 from droidw_cli.config import BackendConfig
+from droidw_cli.slam import graph
+from droidw_cli.slam.distance import frame_distance
 from droidw_cli.slam.frontend import Frontend
 from droidw_cli.slam.optimizer import run_window
 
+#: the candidates' frame distance is averaged over every DISTANCE_STRIDE-th grid pixel
+DISTANCE_STRIDE = 4
 
-def global_ba(frontend: Frontend, cfg: BackendConfig) -> float:
-    """Run the global BA in place on the frontend's buffer; returns the final cost."""
-    n = len(frontend.buffer)
-    if not frontend.initialised or n < 3 or not cfg.enable or cfg.iters <= 0:
-        return float("nan")
-    pairs = frontend.cache.pairs()
-    edges = frontend.cache.edge_set(pairs)
-    params = frontend.params
-    optimize_theta = not params.uncertainty.freeze_in_global
-    if params.optimize_focal != "none":
-        params = dataclasses.replace(params, optimize_focal="none")  # calibration is settled by now
-    with torch.no_grad():
-        return run_window(frontend.backend, frontend.buffer, 0, n, edges, params, frontend.shared,
-                          cfg.iters, fixed=1, optimize_theta=optimize_theta)
+
+class KeyframeImages:
+    """Working-resolution keyframe images, JPEG-encoded, keyed by source frame index."""
+
+    def __init__(self, quality: int):
+        self.quality = int(quality)
+        self._data: dict[int, np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return len(self._data)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(v.nbytes for v in self._data.values())
+
+    def put(self, frame_index: int, image: np.ndarray) -> None:
+        bgr = image[..., ::-1] if image.ndim == 3 else image
+        ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(bgr), [cv2.IMWRITE_JPEG_QUALITY, self.quality])
+        if not ok:
+            raise RuntimeError("JPEG encoding of a keyframe image failed")
+        self._data[int(frame_index)] = buf
+
+    def get(self, frame_index: int) -> np.ndarray:
+        data = self._data[int(frame_index)]
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        return np.ascontiguousarray(image[..., ::-1]) if image.ndim == 3 else image
+
+    def keep(self, frame_indices: set[int]) -> None:
+        """Forget every image whose frame index is not in ``frame_indices``."""
+        self._data = {k: v for k, v in self._data.items() if k in frame_indices}
+
+
+class GlobalBackend:
+    """Periodic and final bounded global BA with proximity edges (module docstring)."""
+
+    def __init__(self, frontend: Frontend, cfg: BackendConfig):
+        self.fe = frontend
+        self.cfg = cfg
+        self.images = KeyframeImages(cfg.image_quality)
+        self.searched = 0  # keyframes below this index have had their proximity candidates evaluated
+        self.last_run = 0  # keyframe count at the last run
+        self.lo = 0  # the problem's first keyframe; everything below is final
+        self.loop_edges = 0
+
+    @property
+    def active(self) -> bool:
+        return self.cfg.enable
+
+    def keyframe_added(self, k: int, image: np.ndarray) -> None:
+        """Keep keyframe k's working image; run the periodic BA when it is due."""
+        if not self.active:
+            return
+        self.images.put(self.fe.buffer.frame_index[k], image)
+        n = len(self.fe.buffer)
+        if self.cfg.every > 0 and self.fe.initialised and n - self.last_run >= self.cfg.every:
+            self.run(self.cfg.periodic_iters)
+
+    def finish(self) -> float:
+        """The final global BA; returns its cost (nan when there is nothing to optimise)."""
+        if not self.active or self.cfg.iters <= 0:
+            return float("nan")
+        return self.run(self.cfg.iters)
+
+    # ------------------------------------------------------------------ internals
+    def _candidates(self, lo: int, n: int) -> list[tuple[int, int]]:
+        """Unordered pairs (i, j), j < i − radius, with i not searched yet, inside [lo, n)."""
+        start = max(lo, self.searched)
+        return [(i, j) for i in range(start, n) for j in range(lo, i - self.cfg.radius)]
+
+    def _proximity(self, lo: int, n: int) -> list[tuple[int, int]]:
+        cand = [p for p in self._candidates(lo, n) if p not in self.fe.cache]
+        self.searched = n
+        if not cand:
+            return []
+        fe, buf = self.fe, self.fe.buffer
+        ii = torch.tensor([p[0] for p in cand], dtype=torch.long, device=buf.device)
+        jj = torch.tensor([p[1] for p in cand], dtype=torch.long, device=buf.device)
+        dist = frame_distance(buf.poses[:n], buf.disps[:n], fe.shared.intrinsics, ii, jj, fe.fcfg.beta,
+                              fe.params.min_depth, stride=DISTANCE_STRIDE)
+        existing = {p for p in fe.cache.pairs() if min(p) >= lo}
+        return graph.select_proximity(cand, dist, self.cfg.thresh, self.cfg.nms, existing, self.cfg.max_new)
+
+    def run(self, iters: int) -> float:
+        """One bounded global BA over [lo, n) with new proximity edges; returns the final cost."""
+        fe = self.fe
+        n = len(fe.buffer)
+        self.last_run = n
+        if not fe.initialised or n < 3:
+            return float("nan")
+        lo = max(0, n - self.cfg.horizon)
+        if lo > self.lo:
+            fe.cache.drop_before(lo)
+            self.lo = lo
+        self.images.keep(set(fe.buffer.frame_index[lo:n]))
+        pairs = self._proximity(lo, n)
+        if pairs:
+            frames = {k for p in pairs for k in p}
+            images = {k: fe.images[k] if k in fe.images else self.images.get(fe.buffer.frame_index[k]) for k in frames}
+            fe.match(pairs, images)
+            self.loop_edges += len(pairs)
+        edges = fe.cache.edge_set(fe.cache.pairs(), offset=lo)
+        params = fe.params
+        if params.optimize_focal != "none":
+            params = dataclasses.replace(params, optimize_focal="none")  # calibration is settled by now
+        fixed = 1 if lo == 0 else 2
+        with torch.no_grad():
+            return run_window(fe.backend, fe.buffer, lo, n, edges, params, fe.shared, iters, fixed=fixed,
+                              optimize_theta=not params.uncertainty.freeze_in_global)

@@ -48,10 +48,19 @@ def _mean_flow(rel: Tensor, disps: Tensor, intrinsics: Tensor, min_depth: float)
 
 
 def frame_distance(poses: Tensor, disps: Tensor, intrinsics: Tensor, ii: Tensor, jj: Tensor,
-                   beta: float = 0.75, min_depth: float = 0.05, bidirectional: bool = True) -> Tensor:
-    """d(i, j) in grid px for every pair (module docstring); poses (N, 7) world-to-camera, disps (N, h, w)."""
+                   beta: float = 0.75, min_depth: float = 0.05, bidirectional: bool = True,
+                   stride: int = 1) -> Tensor:
+    """d(i, j) in grid px for every pair (module docstring); poses (N, 7) world-to-camera, disps (N, h, w).
+
+    ``stride`` s > 1 averages over every s-th grid pixel only (s² times cheaper):
+    the pixel s·x' of the grid is the pixel x' of a grid with intrinsics K/s, so
+    the sub-grid's flow times s is the grid's flow at those pixels.
+    """
     if ii.numel() == 0:
         return torch.zeros(0, dtype=disps.dtype, device=disps.device)
+    if stride > 1:
+        sub = disps[:, ::stride, ::stride]
+        return stride * frame_distance(poses, sub, intrinsics / stride, ii, jj, beta, min_depth, bidirectional)
 
     def one_way(a: Tensor, b: Tensor) -> Tensor:
         rel = pose_compose(poses[b], pose_inverse(poses[a]))

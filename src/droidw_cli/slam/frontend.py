@@ -101,8 +101,14 @@ class Frontend:
         f = torch.where(valid[..., None], flow_grid, torch.zeros_like(flow_grid)).numpy() * 8.0
         return cv2.resize(np.ascontiguousarray(f), (size[1], size[0]), interpolation=cv2.INTER_LINEAR)
 
-    def _match(self, pairs: list[tuple[int, int]], use_prior: bool) -> None:
+    def match(self, pairs: list[tuple[int, int]], images: dict[int, np.ndarray]) -> None:
+        """Cache targets for these pairs (not cached yet) from the given keyframe images, started
+        from the induced flow; for the backend's proximity edges, whose images left the window."""
+        self._match(pairs, use_prior=True, images=images)
+
+    def _match(self, pairs: list[tuple[int, int]], use_prior: bool, images: dict[int, np.ndarray] | None = None) -> None:
         """Compute and cache targets for the pairs not cached yet."""
+        images = self.images if images is None else images
         todo = [p for p in pairs if p not in self.cache]
         if not todo:
             return
@@ -111,7 +117,7 @@ class Frontend:
             wide = [n for n, (i, j) in enumerate(todo) if abs(i - j) > 1]
             if wide:
                 flow, valid = self._induced_flow([todo[n] for n in wide])
-                size = self.images[todo[wide[0]][0]].shape[:2]
+                size = images[todo[wide[0]][0]].shape[:2]
                 for m, n in enumerate(wide):
                     init[n] = self.full_res_flow(flow[m], valid[m], size)
         first = dict(zip(todo, init))
@@ -120,9 +126,9 @@ class Frontend:
             if (i, j) in done:
                 continue
             if (j, i) in first and (j, i) not in done:  # both directions from one forward-backward pair
-                results = zip([(i, j), (j, i)], self.correspondence.match_pair(self.images[i], self.images[j], f0))
+                results = zip([(i, j), (j, i)], self.correspondence.match_pair(images[i], images[j], f0))
             else:
-                results = [((i, j), self.correspondence.match(self.images[i], self.images[j], init_flow=f0))]
+                results = [((i, j), self.correspondence.match(images[i], images[j], init_flow=f0))]
             for key, c in results:
                 done.add(key)
                 self._store(key, c)

@@ -59,6 +59,11 @@ class EdgeCache:
         self.targets = {shift(p): v for p, v in self.targets.items() if k not in p}
         self.born = {shift(p): v for p, v in self.born.items() if k not in p}
 
+    def drop_before(self, lo: int) -> None:
+        """Forget every edge with an end before keyframe ``lo`` (it left the bounded global problem)."""
+        self.targets = {p: v for p, v in self.targets.items() if min(p) >= lo}
+        self.born = {p: v for p, v in self.born.items() if min(p) >= lo}
+
     def edge_set(self, pairs: list[tuple[int, int]], offset: int = 0) -> EdgeSet:
         """Stack cached edges into an :class:`EdgeSet` with indices shifted by ``-offset``."""
         ii = torch.tensor([p[0] - offset for p in pairs], dtype=torch.long, device=self.device)

@@ -28,7 +28,7 @@ from droidw_cli.io.calibration import Calibration
 from droidw_cli.io.frames import FrameSource
 from droidw_cli.io.prefetch import prefetched
 from droidw_cli.io.prepare import FramePreparer
-from droidw_cli.slam.backend import global_ba
+from droidw_cli.slam.backend import GlobalBackend
 from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.frontend import Frontend
 from droidw_cli.slam.motion_filter import MotionFilter
@@ -113,7 +113,7 @@ class Tracker:
         self.progress = progress
         self.timer = StageTimer()
 
-    def _first_pass(self, items, fe: Frontend, mfilter: MotionFilter, filler: TrajectoryFiller,
+    def _first_pass(self, items, fe: Frontend, mfilter: MotionFilter, filler: TrajectoryFiller, gba: GlobalBackend,
                     frames: list[tuple[int, float]], bar, grid: tuple[int, int], hw: tuple[int, int]) -> None:
         """Motion filter, keyframes and the frontend; every other frame goes to the filler."""
         cfg, timer, s = self.cfg, self.timer, self.cfg.io.thumbnail_scale
@@ -137,7 +137,9 @@ class Tracker:
                     d8 = cv2.resize(depth, (grid[1], grid[0]), interpolation=cv2.INTER_NEAREST)
                     prior = torch.from_numpy(np.where(d8 > 0.1, 1.0 / np.maximum(d8, 1e-6), 0.0).astype(np.float32))
                 thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
-                fe.add_keyframe(frame.index, frame.timestamp, image, thumb, feats, prior)
+                k = fe.add_keyframe(frame.index, frame.timestamp, image, thumb, feats, prior)
+                with timer("global_ba"):
+                    gba.keyframe_added(k, image)
                 mfilter.accept(image)
                 with timer("filler"):
                     filler.update()
@@ -178,6 +180,7 @@ class Tracker:
         mfilter = MotionFilter(cfg.motion_filter)
         filler = TrajectoryFiller(fe, cfg.filler)
         fe.on_remove = filler.keyframe_removed
+        gba = GlobalBackend(fe, cfg.backend)
         frames: list[tuple[int, float]] = []
 
         with warnings.catch_warnings(record=True) as caught:
@@ -188,7 +191,7 @@ class Tracker:
                 source.load_depth = cfg.io.use_depth
             items = prefetched(((f, *preparer(f.image, f.depth)) for f in source), cfg.io.prefetch)
             try:
-                self._first_pass(items, fe, mfilter, filler, frames, bar, grid, hw)
+                self._first_pass(items, fe, mfilter, filler, gba, frames, bar, grid, hw)
             finally:
                 items.close()  # stops the prefetch thread, also after an error
                 if restore is not None:
@@ -204,7 +207,7 @@ class Tracker:
                     f"{cfg.frontend.warmup}): the camera barely moved, so the trajectory stays at the identity"
                 )
             with timer("global_ba"):
-                global_ba(fe, cfg.backend)
+                gba.finish()
 
             evidence = fe.evidence()
             unc = _keyframe_uncertainty(fe, evidence)
