@@ -25,13 +25,14 @@ def load_run(run_dir: Path) -> dict:
 
 @click.group("export")
 def export() -> None:
-    """Export a run: PLY point clouds, uncertainty overlays.
+    """Export a run: PLY point clouds, uncertainty overlays, a rendered view of the cloud.
 
     \b
     Examples:
       droidw export ply                      # inside a run folder: ./static.ply
       droidw export ply run/ --what dynamic --out dynamic.ply
       droidw export uncertainty run/ --out overlays/ --video
+      droidw export render run/ --out cloud.png --what all
     """
 
 
@@ -83,3 +84,56 @@ def uncertainty(run_dir, out, video):
     except ValueError as exc:
         raise InputError(str(exc)) from None
     click.echo(f"wrote {len(paths)} files to {out}")
+
+
+def _parse_size(ctx, param, value: str) -> tuple[int, int]:
+    parts = value.lower().replace("×", "x").split("x")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise click.BadParameter(f"expected WIDTHxHEIGHT such as 640x480, got {value!r}")
+    return int(parts[0]), int(parts[1])
+
+
+@export.command("render")
+@click.argument("run_dir", type=click.Path(path_type=Path), default=Path("."), required=False)
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("cloud.png"), show_default=True)
+@click.option("--what", type=click.Choice(["static", "all"]), default="static", show_default=True,
+              help="The static cloud, or every point with the dynamic ones in red.")
+@click.option("--size", callback=_parse_size, default="640x480", show_default=True, metavar="WxH")
+@click.option("--azimuth", type=float, default=0.0, show_default=True,
+              help="Degrees about the scene's up axis; 0 looks the way the cameras looked.")
+@click.option("--elevation", type=float, default=25.0, show_default=True, help="Degrees above the horizontal.")
+@click.option("--zoom", type=float, default=1.0, show_default=True)
+@click.option("--point-size", type=int, default=2, show_default=True, help="Splat side in pixels.")
+@click.option("--no-trajectory", is_flag=True, help="Do not draw the keyframe path.")
+@click.option("--max-uncertainty", type=float, default=0.8, show_default=True, help="As for `export ply`.")
+@click.option("--min-views", type=int, default=2, show_default=True, help="As for `export ply`.")
+@click.option("--stride", type=int, default=1, show_default=True, help="Use every N-th keyframe.")
+def render(run_dir, out, what, size, azimuth, elevation, zoom, point_size, no_trajectory, max_uncertainty,
+           min_views, stride):
+    """Render the run's point cloud from a virtual camera into a PNG (headless).
+
+    The camera orbits the middle of the cloud and frames it; the keyframe
+    path is drawn in orange.
+    """
+    from droidw_cli.export.pointcloud import CloudParams, build_cloud
+    from droidw_cli.export.render import RenderParams, render_cloud, write_png
+
+    if stride < 1 or min_views < 0:
+        raise InputError("--stride must be ≥ 1 and --min-views ≥ 0")
+    try:
+        params = RenderParams(width=size[0], height=size[1], azimuth=azimuth, elevation=elevation, zoom=zoom,
+                              point_size=point_size)
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    npz = load_run(run_dir)
+    try:
+        cloud = build_cloud(npz, CloudParams(max_uncertainty=max_uncertainty, min_views=min_views, stride=stride))
+    except ValueError as exc:
+        raise InputError(f"{run_dir}: {exc}") from None
+    part = cloud.select(cloud.static) if what == "static" else cloud
+    if len(part.xyz) == 0:
+        raise InputError(f"{run_dir}: no {what} points to render (try --what all or a larger --max-uncertainty)")
+    image = render_cloud(part.xyz, part.rgb, npz["poses_c2w"], params,
+                         dynamic=None if what == "static" else ~part.static, trajectory=not no_trajectory)
+    write_png(out, image)
+    click.echo(f"rendered {len(part.xyz)} points to {out} ({size[0]}x{size[1]})")
