@@ -1,0 +1,141 @@
+"""Dynamic objects of a finished run: final masks, ids over the keyframes, centres and 3D centroids.
+
+After the global BA (:func:`finish`):
+
+1. With scene consistency on, every keyframe is checked once more under
+   the final poses, against up to ``consistency_sources`` keyframes on *each*
+   side (the online check only had predecessors).  A keyframe's dynamic mask
+   M_k is the union of that result and every mask it was given online
+   (consistency, epipolar): the static map leaves all of it out.
+2. Object ids (:class:`~droidw_cli.dynamics.tracker.DynamicObjectTracker`,
+   ADD-SLAM's rules: a track ends at the border, on an area jump or a centre
+   jump) over the keyframes in order.  Before each update, an active object
+   whose previous centre c finds no mask in the new keyframe is *propagated*
+   from c: c prompts the segmenter when the new keyframe at c still looks like
+   the object (depth within ``depth_rel_tol`` of its median depth δ, colour
+   within ``color_tol`` + ``color_spread`` σ of its mean colour μ), and the
+   grown region is kept when its area is within ``track_growth``× of the
+   object's last area either way.
+3. Per object and keyframe: the image centre (inscribed circle, mapped to the
+   input image's pixels by the caller) and the world centroid
+
+       X̄ = (1/|O|) Σ_{p∈O} G_k⁻¹ · (D_p K⁻¹ p̃),
+
+   with D the observed depth (the sensor's in RGB-D mode, else 1/d from BA).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from droidw_cli.config import DynamicsConfig
+from droidw_cli.dynamics.inloop import KeyframeMasks
+from droidw_cli.dynamics.tracker import DynamicObjectTracker
+from droidw_cli.slam.poses import invert, to_matrix
+
+#: columns of :attr:`DynamicRecord.table`
+TABLE_COLUMNS = ("keyframe", "id", "cx", "cy", "x", "y", "z", "area")
+
+
+@dataclass(frozen=True)
+class DynamicRecord:
+    """Per keyframe: ``masks`` (K, h, w) bool, ``ids`` (K, h, w) int32 (−1: no object);
+    ``table`` (M, 8) float64 rows of :data:`TABLE_COLUMNS` (centre in grid px, centroid in world metres)."""
+
+    masks: np.ndarray
+    ids: np.ndarray
+    table: np.ndarray
+
+
+def _depth(disp: Tensor) -> Tensor:
+    return torch.where(disp > 0, 1.0 / disp.clamp(min=1e-6), torch.zeros_like(disp))
+
+
+def _stats(image: Tensor, depth: Tensor, mask: Tensor) -> tuple[Tensor, float, float] | None:
+    """(mean colour μ, RMS spread σ, median depth δ) of the object's pixels with known depth."""
+    ok = mask & (depth > 0)
+    if not bool(ok.any()):
+        return None
+    cols = image[ok]
+    mu = cols.mean(0)
+    return mu, float(((cols - mu) ** 2).sum(-1).mean().sqrt()), float(depth[ok].median())
+
+
+def _propagate(masks: KeyframeMasks, mask: Tensor, image: Tensor, depth: Tensor, tracker: DynamicObjectTracker,
+               stats: dict[int, tuple[Tensor, float, float]], cfg: DynamicsConfig) -> Tensor:
+    """``mask`` plus the objects grown from the previous centres of active tracks it misses."""
+    if masks.segmenter is None or not tracker.active:
+        return mask
+    h, w = mask.shape
+    p = masks.params
+    out = mask.clone()
+    for tid, obj in sorted(tracker.active.items()):  # a handful of objects
+        x, y = int(round(obj.centre[0])), int(round(obj.centre[1]))
+        if not (0 <= x < w and 0 <= y < h) or bool(mask[y, x]) or tid not in stats:
+            continue
+        mu, sigma, delta = stats[tid]
+        d = float(depth[y, x])
+        colour_ok = float((image[y, x] - mu).norm()) <= max(p.color_tol, p.color_spread * sigma)
+        if d <= 0 or abs(d - delta) > p.depth_rel_tol * delta or not colour_ok:
+            continue
+        seed = torch.zeros_like(mask)
+        seed[y, x] = True
+        grown = masks.segmenter.segment(seed, image, depth).mask & ~out
+        area = int(grown.sum())
+        if obj.area / cfg.track_growth <= area <= obj.area * cfg.track_growth:
+            out |= grown
+    return out
+
+
+def finish(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsics: Tensor,
+           cfg: DynamicsConfig) -> DynamicRecord:
+    """Final masks, object ids and per-keyframe object centres and centroids (see the module docstring).
+
+    ``poses_w2c`` (K, 7), ``disps_obs`` (K, h, w) observed disparities, ``intrinsics`` (4,) of the grid.
+    """
+    n = len(masks)
+    h, w = masks.grid
+    g = poses_w2c[:n].detach().float().cpu()
+    d = disps_obs[:n].detach().float().cpu()
+    kk = intrinsics.detach().double().cpu()
+    m = cfg.consistency_sources
+    for k in range(n):
+        if masks.consistency:
+            sources = [j for j in range(k - m, k + m + 1) if j != k and 0 <= j < n]
+            objects = masks.detect(k, g, d, intrinsics, sources)
+            if objects is not None:
+                masks.record(k, objects.mask)
+    tracker = DynamicObjectTracker(border=cfg.track_border, max_growth=cfg.track_growth, max_jump=cfg.track_jump,
+                                   min_area=masks.params.min_object_area)
+    ids = np.full((n, h, w), -1, dtype=np.int32)
+    rows: list[list[float]] = []
+    stats: dict[int, tuple[Tensor, float, float]] = {}
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    rays = np.stack([(gx - float(kk[2])) / float(kk[0]), (gy - float(kk[3])) / float(kk[1]), np.ones_like(gx)], -1)
+    c2w = to_matrix(invert(g.double())) if n else np.zeros((0, 4, 4))
+    for k in range(n):
+        depth = _depth(d[k])
+        mask = _propagate(masks, masks.masks[k], masks.images[k], depth, tracker, stats, cfg)
+        masks.masks[k] = mask
+        objs = tracker.update(mask)
+        stats = {}
+        depth_np = depth.numpy().astype(np.float64)
+        for obj in objs:
+            ids[k][obj.mask] = obj.id
+            s = _stats(masks.images[k], depth, torch.from_numpy(obj.mask))
+            if s is not None:
+                stats[obj.id] = s
+            ok = obj.mask & (depth_np > 0)
+            if ok.any():
+                pts = rays[ok] * depth_np[ok][:, None]
+                world = pts @ c2w[k, :3, :3].T + c2w[k, :3, 3]
+                centroid = world.mean(0)
+            else:
+                centroid = np.full(3, np.nan)
+            rows.append([k, obj.id, obj.centre[0], obj.centre[1], *centroid, obj.area])
+    table = np.array(rows, dtype=np.float64).reshape(-1, len(TABLE_COLUMNS))
+    return DynamicRecord(masks.stacked(), ids, table)
