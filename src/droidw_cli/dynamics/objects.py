@@ -11,7 +11,7 @@ After the global BA (:func:`finish`):
    ADD-SLAM's rules: a track ends at the border, on an area jump or a centre
    jump) over the keyframes in order.  Before each update, an active object
    whose previous centre c finds no mask in the new keyframe is *propagated*
-   from c: c prompts the segmenter when the new keyframe at c still looks like
+   from c: the 3 × 3 pixels at c prompt the segmenter when the new keyframe at c still looks like
    the object (depth within ``depth_rel_tol`` of its median depth δ, colour
    within ``color_tol`` + ``color_spread`` σ of its mean colour μ), and the
    grown region is kept when its area is within ``track_growth``× of the
@@ -82,8 +82,8 @@ def _propagate(masks: KeyframeMasks, mask: Tensor, image: Tensor, depth: Tensor,
         colour_ok = float((image[y, x] - mu).norm()) <= max(p.color_tol, p.color_spread * sigma)
         if d <= 0 or abs(d - delta) > p.depth_rel_tol * delta or not colour_ok:
             continue
-        seed = torch.zeros_like(mask)
-        seed[y, x] = True
+        seed = torch.zeros_like(mask)  # a 3 × 3 prompt at the centre (a seed needs min_seed_area pixels)
+        seed[max(0, y - 1):y + 2, max(0, x - 1):x + 2] = True
         grown = masks.segmenter.segment(seed, image, depth).mask & ~out
         area = int(grown.sum())
         if obj.area / cfg.track_growth <= area <= obj.area * cfg.track_growth:
