@@ -194,11 +194,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
     ap.add_argument("--uncertainty", type=int, default=1, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.one_mode:  # run_case_subprocess also passes --one
+        one_mode(args)
+        return
     if args.one:
         one(args)
-        return
-    if args.one_mode:
-        one_mode(args)
         return
     if args.modes:
         if args.frames == 300:  # the default of the first table; the presets keep their own length
