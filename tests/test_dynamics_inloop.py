@@ -113,3 +113,17 @@ def test_segmenter_interface():
     assert grown.count == 1 and int(grown.areas[0]) == 64  # the whole 8×8 block, nothing else
     with pytest.raises(UserError, match="unknown segmenter"):
         get_segmenter("mobilesam")
+
+
+def test_a_predicted_centre_keeps_the_id_across_a_large_image_motion():
+    from droidw_cli.dynamics.tracker import DynamicObjectTracker
+
+    first = np.zeros((H, W), bool)
+    first[8:16, 4:10] = True
+    second = np.zeros((H, W), bool)
+    second[8:16, 18:24] = True  # 14 px to the right: more than 20 % of the width
+    plain, told = DynamicObjectTracker(), DynamicObjectTracker()
+    a = plain.update(first)[0].id
+    assert told.update(first)[0].id == a
+    assert plain.update(second)[0].id != a  # lost: a new id
+    assert told.update(second, predicted={a: (20.5, 11.5)})[0].id == a

@@ -66,13 +66,15 @@ class KeyframeMasks:
         self.images: list[Tensor] = []
         self.masks: list[Tensor] = []  # union of every mask ever given (the map leaves these out)
         self.current: list[Tensor] = []  # the latest consistency mask (BA zeroes these)
+        self.times: list[float] = []  # keyframe timestamps (object motion over time)
 
     def __len__(self) -> int:
         return len(self.masks)
 
-    def append(self, image: np.ndarray) -> None:
-        """Register a new keyframe (its working-size image)."""
+    def append(self, image: np.ndarray, timestamp: float | None = None) -> None:
+        """Register a new keyframe (its working-size image and timestamp)."""
         self.images.append(grid_image(image, self.grid))
+        self.times.append(float(len(self.times) if timestamp is None else timestamp))
         self.masks.append(torch.zeros(self.grid, dtype=torch.bool))
         self.current.append(torch.zeros(self.grid, dtype=torch.bool))
 
@@ -81,6 +83,7 @@ class KeyframeMasks:
         del self.images[k]
         del self.masks[k]
         del self.current[k]
+        del self.times[k]
 
     def record(self, k: int, mask: Tensor | np.ndarray) -> None:
         """Add ``mask`` (h, w) to keyframe k's union of dynamic masks."""

@@ -9,7 +9,11 @@ After the global BA (:func:`finish`):
    (consistency, epipolar): the static map leaves all of it out.
 2. Object ids (:class:`~droidw_cli.dynamics.tracker.DynamicObjectTracker`,
    ADD-SLAM's rules: a track ends at the border, on an area jump or a centre
-   jump) over the keyframes in order.  Before each update, an active object
+   jump) over the keyframes in order.  Keyframes lie several frames apart, so
+   an object's previous centre is first carried into the new keyframe: its
+   world centroid X̄ (moved on at its constant world velocity from the two
+   keyframes before, when it has them) projected with the new pose,
+   c' = Π(G_k X̄); matching and the jump test use c'.  Before each update, an active object
    whose previous centre c finds no mask in the new keyframe is *propagated*
    from c: the 3 × 3 pixels at c prompt the segmenter when the new keyframe at c still looks like
    the object (depth within ``depth_rel_tol`` of its median depth δ, colour
@@ -65,16 +69,53 @@ def _stats(image: Tensor, depth: Tensor, mask: Tensor) -> tuple[Tensor, float, f
     return mu, float(((cols - mu) ** 2).sum(-1).mean().sqrt()), float(depth[ok].median())
 
 
+def _project(x: np.ndarray, c2w: np.ndarray, kk: Tensor) -> np.ndarray | None:
+    """Grid pixel (2,) of world point x in a camera (None behind it)."""
+    p = c2w[:3, :3].T @ (x - c2w[:3, 3])
+    if p[2] <= 1e-3:
+        return None
+    fx, fy, cx, cy = (float(v) for v in kk)
+    return np.array([fx * p[0] / p[2] + cx, fy * p[1] / p[2] + cy])
+
+
+def _predict(history: dict[int, list[tuple[int, np.ndarray]]], tracker: DynamicObjectTracker, times: np.ndarray,
+             k: int, c2w: np.ndarray, kk: Tensor, hw: tuple[int, int]) -> dict[int, tuple[float, float]]:
+    """Centre c' (grid px) in keyframe k (camera-to-world poses ``c2w`` (K, 4, 4)) of each active object with a world centroid (see step 2).
+
+    c' = c + Π_k(X̄') − Π_j(X̄): the previous centre c (keyframe j) moved by the image motion of
+    the centroid, because the inscribed-circle centre and the centroid's projection differ.
+    """
+    out = {}
+    for tid, obj in tracker.active.items():
+        seen = history.get(tid)
+        if not seen:
+            continue
+        k1, x1 = seen[-1]
+        x = x1
+        if len(seen) >= 2 and times[k1] > times[seen[-2][0]]:
+            k0, x0 = seen[-2]
+            x = x1 + (x1 - x0) * (times[k] - times[k1]) / (times[k1] - times[k0])
+        a, b = _project(x1, c2w[k1], kk), _project(x, c2w[k], kk)
+        if a is None or b is None:
+            continue
+        u, v = obj.centre[0] + b[0] - a[0], obj.centre[1] + b[1] - a[1]
+        if 0 <= u <= hw[1] - 1 and 0 <= v <= hw[0] - 1:
+            out[tid] = (float(u), float(v))
+    return out
+
+
 def _propagate(masks: KeyframeMasks, mask: Tensor, image: Tensor, depth: Tensor, tracker: DynamicObjectTracker,
-               stats: dict[int, tuple[Tensor, float, float]], cfg: DynamicsConfig) -> Tensor:
-    """``mask`` plus the objects grown from the previous centres of active tracks it misses."""
+               stats: dict[int, tuple[Tensor, float, float]], cfg: DynamicsConfig,
+               predicted: dict[int, tuple[float, float]]) -> Tensor:
+    """``mask`` plus the objects grown from the (predicted) centres of active tracks it misses."""
     if masks.segmenter is None or not tracker.active:
         return mask
     h, w = mask.shape
     p = masks.params
     out = mask.clone()
     for tid, obj in sorted(tracker.active.items()):  # a handful of objects
-        x, y = int(round(obj.centre[0])), int(round(obj.centre[1]))
+        centre = predicted.get(tid, obj.centre)
+        x, y = int(round(centre[0])), int(round(centre[1]))
         if not (0 <= x < w and 0 <= y < h) or bool(mask[y, x]) or tid not in stats:
             continue
         mu, sigma, delta = stats[tid]
@@ -91,24 +132,30 @@ def _propagate(masks: KeyframeMasks, mask: Tensor, image: Tensor, depth: Tensor,
     return out
 
 
-def finish(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsics: Tensor,
-           cfg: DynamicsConfig) -> DynamicRecord:
-    """Final masks, object ids and per-keyframe object centres and centroids (see the module docstring).
-
-    ``poses_w2c`` (K, 7), ``disps_obs`` (K, h, w) observed disparities, ``intrinsics`` (4,) of the grid.
-    """
+def final_pass(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsics: Tensor,
+               cfg: DynamicsConfig) -> None:
+    """Step 1: scene consistency of every keyframe under the final poses, both sides; joins the record."""
     n = len(masks)
-    h, w = masks.grid
+    if not masks.consistency:
+        return
     g = poses_w2c[:n].detach().float().cpu()
     d = disps_obs[:n].detach().float().cpu()
-    kk = intrinsics.detach().double().cpu()
     m = cfg.consistency_sources
     for k in range(n):
-        if masks.consistency:
-            sources = [j for j in range(k - m, k + m + 1) if j != k and 0 <= j < n]
-            objects = masks.detect(k, g, d, intrinsics, sources)
-            if objects is not None:
-                masks.record(k, objects.mask)
+        sources = [j for j in range(k - m, k + m + 1) if j != k and 0 <= j < n]
+        objects = masks.detect(k, g, d, intrinsics, sources)
+        if objects is not None:
+            masks.record(k, objects.mask)
+
+
+def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsics: Tensor,
+                  cfg: DynamicsConfig) -> DynamicRecord:
+    """Steps 2-3: propagation, ids, and per object and keyframe its centre and world centroid."""
+    n = len(masks)
+    h, w = masks.grid
+    g = poses_w2c[:n].detach().double().cpu()
+    d = disps_obs[:n].detach().float().cpu()
+    kk = intrinsics.detach().double().cpu()
     tracker = DynamicObjectTracker(border=cfg.track_border, max_growth=cfg.track_growth, max_jump=cfg.track_jump,
                                    min_area=masks.params.min_object_area)
     ids = np.full((n, h, w), -1, dtype=np.int32)
@@ -116,12 +163,15 @@ def finish(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsic
     stats: dict[int, tuple[Tensor, float, float]] = {}
     gx, gy = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     rays = np.stack([(gx - float(kk[2])) / float(kk[0]), (gy - float(kk[3])) / float(kk[1]), np.ones_like(gx)], -1)
-    c2w = to_matrix(invert(g.double())) if n else np.zeros((0, 4, 4))
+    c2w = to_matrix(invert(g)) if n else np.zeros((0, 4, 4))
+    history: dict[int, list[tuple[int, np.ndarray]]] = {}  # id → (keyframe, world centroid) so far
+    times = np.asarray(masks.times, dtype=np.float64)
     for k in range(n):
         depth = _depth(d[k])
-        mask = _propagate(masks, masks.masks[k], masks.images[k], depth, tracker, stats, cfg)
+        predicted = _predict(history, tracker, times, k, c2w, kk, (h, w))
+        mask = _propagate(masks, masks.masks[k], masks.images[k], depth, tracker, stats, cfg, predicted)
         masks.masks[k] = mask
-        objs = tracker.update(mask)
+        objs = tracker.update(mask, predicted)
         stats = {}
         depth_np = depth.numpy().astype(np.float64)
         for obj in objs:
@@ -130,12 +180,21 @@ def finish(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsic
             if s is not None:
                 stats[obj.id] = s
             ok = obj.mask & (depth_np > 0)
+            centroid = np.full(3, np.nan)
             if ok.any():
-                pts = rays[ok] * depth_np[ok][:, None]
-                world = pts @ c2w[k, :3, :3].T + c2w[k, :3, 3]
+                world = (rays[ok] * depth_np[ok][:, None]) @ c2w[k, :3, :3].T + c2w[k, :3, 3]
                 centroid = world.mean(0)
-            else:
-                centroid = np.full(3, np.nan)
+                history.setdefault(obj.id, []).append((k, centroid))
             rows.append([k, obj.id, obj.centre[0], obj.centre[1], *centroid, obj.area])
     table = np.array(rows, dtype=np.float64).reshape(-1, len(TABLE_COLUMNS))
     return DynamicRecord(masks.stacked(), ids, table)
+
+
+def finish(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsics: Tensor,
+           cfg: DynamicsConfig) -> DynamicRecord:
+    """Final masks, object ids and per-keyframe object centres and centroids (see the module docstring).
+
+    ``poses_w2c`` (K, 7), ``disps_obs`` (K, h, w) observed disparities, ``intrinsics`` (4,) of the grid.
+    """
+    final_pass(masks, poses_w2c, disps_obs, intrinsics, cfg)
+    return track_objects(masks, poses_w2c, disps_obs, intrinsics, cfg)

@@ -213,7 +213,7 @@ class Frontend:
             pose, disp = torch.tensor([0, 0, 0, 0, 0, 0, 1.0]), 1.0
         buf.append(frame_index, timestamp, pose, disp, thumbnail, features, depth_prior)
         self.images[k] = image
-        self.masks.append(image)
+        self.masks.append(image, timestamp)
         if not self.initialised:
             if self._ready(k):
                 self._initialise()
