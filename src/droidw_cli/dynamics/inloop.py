@@ -79,7 +79,9 @@ class KeyframeMasks:
         self.current.append(torch.zeros(self.grid, dtype=torch.bool))
 
     def remove(self, k: int) -> None:
-        """Keyframe removal: drop k, the later keyframes move down by one."""
+        """Keyframe removal: drop k, the later keyframes move down by one (a k never registered is ignored)."""
+        if k >= len(self.masks):
+            return
         del self.images[k]
         del self.masks[k]
         del self.current[k]
