@@ -10,16 +10,16 @@ After the global BA (:func:`finish`):
 2. Object ids (:class:`~droidw_cli.dynamics.tracker.DynamicObjectTracker`,
    ADD-SLAM's rules: a track ends at the border, on an area jump or a centre
    jump) over the keyframes in order.  Keyframes lie several frames apart, so
-   an object's previous centre is first carried into the new keyframe: its
-   world centroid X̄ (moved on at its constant world velocity from the two
-   keyframes before, when it has them) projected with the new pose,
-   c' = Π(G_k X̄); matching and the jump test use c'.  Before each update, an active object
-   whose previous centre c finds no mask in the new keyframe is *propagated*
-   from c: the 3 × 3 pixels at c prompt the segmenter when the new keyframe at c still looks like
-   the object (depth within ``depth_rel_tol`` of its median depth δ, colour
-   within ``color_tol`` + ``color_spread`` σ of its mean colour μ), and the
-   grown region is kept when its area is within ``track_growth``× of the
-   object's last area either way.
+   an object's previous centre c (keyframe j) is first carried into the new
+   keyframe k by the image motion of its world centroid X̄, moved on to X̄' at
+   its constant world velocity from the two keyframes before when it has them:
+   c' = c + Π(G_k X̄') − Π(G_j X̄).  Matching and the jump test use c'.  An
+   active object that finds no mask at c' is *propagated* from c': the 3 × 3
+   pixels at c' prompt the segmenter when the new keyframe there still looks
+   like the object (depth within ``depth_rel_tol`` of its median depth δ,
+   colour within max(``color_tol``, ``color_spread`` σ) of its mean colour μ),
+   and the grown region is kept when its area is within ``track_growth``× of
+   the object's last area either way.
 3. Per object and keyframe: the image centre (inscribed circle, mapped to the
    input image's pixels by the caller) and the world centroid
 
