@@ -94,7 +94,7 @@ def test_no_propagation_onto_background_that_does_not_look_like_the_object():
 
 def test_dynamics_mode_is_validated_and_settable():
     assert load_config("default").dynamics.mode == "epipolar"  # the monocular default (README: mask modes)
-    assert load_config("rgbd").dynamics.mode == "consistency"  # the RGB-D default
+    assert load_config("rgbd").dynamics.mode == "both"  # the RGB-D default
     cfg = load_config("default", ["dynamics.mode=both"]).dynamics
     assert cfg.epipolar and cfg.consistency
     assert not load_config("default", ["dynamics.mode=none"]).dynamics.epipolar
