@@ -1,11 +1,23 @@
-"""Dynamic-scene benchmark: what the uncertainty buys, per synthetic sequence.
+"""Dynamic-scene benchmark: what the uncertainty buys, and RGB-D against monocular per mask mode.
 
     python benchmarks/dynamic_bench.py [--frames 300] [--size 640x480] [--seeds 1 2 3] [--set KEY=VALUE ...]
+    python benchmarks/dynamic_bench.py --modes [--presets walk wobble stopgo rotate] [--mono-modes ...]
+                                       [--rgbd-modes ...] [--frames 0]
 
-One row per sequence (3 dynamic seeds and a static control): ATE with and
-without uncertainty and their ratio, the uncertainty AUROC against the
-ground-truth dynamic masks over all keyframes, the share of ground-truth
-dynamic pixels in the static point cloud, and frames/s for both runs.
+Default table: one row per sequence (3 dynamic seeds and a static control):
+ATE with and without uncertainty and their ratio, the uncertainty AUROC
+against the ground-truth dynamic masks over all keyframes, the share of
+ground-truth dynamic pixels in the static point cloud, and frames/s for both runs.
+
+``--modes``: one row per realistic 640×480 preset (450 frames; rendered into
+``benchmarks/.cache`` like track_bench) and run: monocular (``default``
+config, Sim(3) ATE) and RGB-D (``rgbd`` config, SE(3) ATE), each with every
+``dynamics.mode`` asked for.  Per run: ATE, the IoU of the keyframes' dynamic
+masks (``keyframes.npz`` ``dynamic``) against the ground truth on the BA
+grid (pooled over the keyframes where a walker covers ≥ 1 cell), object-id
+switches (per walker: changes of the id that overlaps it most, over the
+keyframes where it is visible; the worst walker), the share of ground-truth
+dynamic pixels in the static cloud, and frames/s.
 """
 
 from __future__ import annotations
@@ -69,19 +81,129 @@ def one(args: argparse.Namespace) -> None:
     print(json.dumps(out))
 
 
+def instance_masks(cfg, scene, kf_index: np.ndarray, target_area: int) -> np.ndarray:
+    """(walkers, K, h, w) ground-truth mask of each walker (where it is the nearest surface) on the BA grid."""
+    import cv2
+
+    from droidw_cli.geometry.camera import BA_SCALE
+    from droidw_cli.io.prepare import FramePreparer
+
+    prep = FramePreparer((cfg.height, cfg.width), None, target_area)
+    h, w = prep.size[0] // BA_SCALE, prep.size[1] // BA_SCALE
+    out = np.zeros((len(scene.walkers), len(kf_index), h, w), dtype=bool)
+    for n, k in enumerate(kf_index):
+        pose = scene.pose(int(k))
+        full = scene.caster.cast(scene.boxes(int(k)), pose).depth
+        t = float(scene.walker_time(int(k)))
+        for i, walker in enumerate(scene.walkers):
+            hits = scene.caster.cast(scene.static_boxes + walker.boxes(t), pose)
+            m = (hits.dynamic & (hits.depth <= full + 1e-6)).astype(np.uint8) * 255
+            work = prep.image(np.repeat(m[..., None], 3, axis=2))[..., 0].astype(np.float32) / 255.0
+            out[i, n] = cv2.resize(work, (w, h), interpolation=cv2.INTER_AREA) >= 0.5
+    return out
+
+
+def id_switches(instances: np.ndarray, ids: np.ndarray) -> int:
+    """The most id changes of any walker: per keyframe where it is visible, the id overlapping it most."""
+    worst = 0
+    for inst in instances:
+        seq = []
+        for m, lab in zip(inst, ids):
+            hit = lab[m & (lab >= 0)]
+            if hit.size:
+                seq.append(int(np.bincount(hit).argmax()))
+        worst = max(worst, sum(a != b for a, b in zip(seq, seq[1:])))
+    return worst
+
+
+def one_mode(args: argparse.Namespace) -> None:
+    """One --modes case: a cached preset tracked with one config and dynamics.mode; prints a JSON line."""
+    from droidw_cli.config import load_config
+    from droidw_cli.eval import evaluate_ate
+    from droidw_cli.export.pointcloud import CloudParams, build_cloud
+    from droidw_cli.export.run_files import keyframe_arrays
+    from droidw_cli.io.frames import open_source
+    from droidw_cli.io.trajectory import Trajectory
+    from droidw_cli.synth import SynthConfig, build_scene
+    from droidw_cli.synth.writer import write_sequence
+
+    cache = Path(__file__).resolve().parent / ".cache"
+    cfg = SynthConfig.preset(args.preset, seed=args.seed, **({"frames": args.frames} if args.frames else {}))
+    folder = cache / f"{args.preset}-seed{cfg.seed}-{cfg.frames}"
+    if not (folder / "rgb.txt").exists():
+        write_sequence(cfg, folder, progress=False, overwrite=True)
+    source = open_source(folder)
+    overrides = [f"dynamics.mode={args.mode}", *args.set]
+    if args.config == "rgbd":
+        source.strict_depth = True
+    result, seconds = track_source(source, source.intrinsics_hint, overrides, config=args.config)
+    scene = build_scene(cfg)
+    gt = Trajectory(np.array([cfg.timestamp(k) for k in range(cfg.frames)]),
+                    np.asarray(scene.pose(np.arange(cfg.frames)), dtype=np.float64))
+    est = Trajectory(result.timestamps, result.poses_c2w)
+    out = {"sim3_cm": evaluate_ate(gt, est).rmse * 100, "se3_cm": evaluate_ate(gt, est, "se3").rmse * 100,
+           "fps": len(result.timestamps) / seconds, "keyframes": int(len(result.kf_index))}
+    area = load_config(args.config, overrides).io.target_area
+    inst = instance_masks(cfg, scene, result.kf_index, area)
+    truth = inst.any(0)
+    if result.kf_dynamic is not None:
+        pred = result.kf_dynamic
+        seen = truth.reshape(len(truth), -1).any(1)
+        out["iou"] = float((pred & truth)[seen].sum() / max(1, (pred | truth)[seen].sum()))
+        out["id_switches"] = id_switches(inst, result.kf_object_ids)
+        out["objects"] = int(len(np.unique(result.objects[:, 1]))) if len(result.objects) else 0
+    cloud = build_cloud(keyframe_arrays(result), CloudParams())
+    out["static_dynamic_share"] = float((cloud.static & truth.reshape(-1)).sum() / max(1, cloud.static.sum()))
+    print(json.dumps(out))
+
+
+def modes_table(args: argparse.Namespace) -> None:
+    common = ["--frames", str(args.frames)] + [x for s in args.set for x in ("--set", s)]
+    rows = []
+    for preset in args.presets:
+        runs = [("default", m) for m in args.mono_modes] + [("rgbd", m) for m in args.rgbd_modes]
+        for config, mode in runs:
+            r = run_case_subprocess("dynamic_bench.py", ["--one-mode", "--preset", preset, "--seed", str(args.seeds[0]),
+                                                         "--config", config, "--mode", mode, *common])
+            ate = r["se3_cm"] if config == "rgbd" else r["sim3_cm"]
+            rows.append([preset, "RGB-D" if config == "rgbd" else "mono", mode,
+                         f"{ate:.2f} ({'SE3' if config == 'rgbd' else 'Sim3'})", f"{r.get('iou', float('nan')):.2f}",
+                         r.get("id_switches", "–"), r.get("objects", "–"),
+                         f"{100 * r['static_dynamic_share']:.2f}", f"{r['fps']:.2f}"])
+            print(" | ".join(str(c) for c in rows[-1]), file=sys.stderr, flush=True)
+    print(f"\nMask modes, monocular and RGB-D, 640x480 presets (seed {args.seeds[0]})")
+    print_table(["sequence", "input", "dynamics.mode", "ATE [cm]", "mask IoU", "id switches (worst walker)",
+                 "objects", "dynamic in static PLY [%]", "frames/s"], rows)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--modes", action="store_true", help="the RGB-D / monocular mask-mode table")
+    ap.add_argument("--presets", nargs="+", default=["walk", "wobble", "stopgo", "rotate"])
+    ap.add_argument("--mono-modes", nargs="*", default=["epipolar", "consistency", "both"])
+    ap.add_argument("--rgbd-modes", nargs="*", default=["epipolar", "consistency", "both"])
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--one-mode", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--config", default="default", help=argparse.SUPPRESS)
+    ap.add_argument("--mode", default="epipolar", help=argparse.SUPPRESS)
     ap.add_argument("--preset", default="dynamic", help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
     ap.add_argument("--uncertainty", type=int, default=1, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.one_mode:  # run_case_subprocess also passes --one
+        one_mode(args)
+        return
     if args.one:
         one(args)
+        return
+    if args.modes:
+        if args.frames == 300:  # the default of the first table; the presets keep their own length
+            args.frames = 0
+        modes_table(args)
         return
     common = ["--size", args.size, "--frames", str(args.frames)] + [x for s in args.set for x in ("--set", s)]
     cases = [("dynamic", s) for s in args.seeds] + [("static", args.seeds[0])]

@@ -48,7 +48,7 @@ def test_static_cloud_excludes_mover_and_ply_is_readable(tmp_path):
     np.testing.assert_allclose(data["vertex"]["z"], static.xyz[:, 2])
     dyn = plyfile.PlyData.read(str(tmp_path / "dynamic.ply"))
     assert dyn["vertex"].count == m
-    assert set(np.unique(dyn["vertex"]["time"])) <= {0.0, 0.1, 0.2, 0.30000000000000004, 0.4}
+    assert set(np.unique(dyn["vertex"]["t"])) <= {0.0, 0.1, 0.2, 0.30000000000000004, 0.4}
 
 
 def test_stride_and_no_partial_file(tmp_path):

@@ -167,26 +167,64 @@ class FillerConfig:
     uncertainty: bool = True  # weight the keyframes' pixels by their uncertainty
 
 
+#: the dynamic-mask modes of ``dynamics.mode``
+DYNAMICS_MODES = ("epipolar", "consistency", "both", "none")
+
+
 @dataclass(frozen=True)
 class DynamicsConfig:
-    """Explicit dynamic detection (:mod:`droidw_cli.dynamics`).
+    """Explicit dynamic masks (:mod:`droidw_cli.dynamics`); the learned uncertainty is independent of them.
 
-    ``epipolar``: with ``uncertainty.enable``, the pixels of a keyframe that the
-    dominant epipolar geometry of its edges cannot explain get zero
-    correspondence confidence (:mod:`droidw_cli.dynamics.epipolar`): Sampson
-    distance above ``epipolar_thresh`` working-resolution px on any edge,
-    grown by ``epipolar_dilate`` grid cells.  Off while the focal length is
-    estimated (``--calib auto``): on a real clip the masks took the focal
-    length from 617 px to 17 px.
-    ``tau_scale``: ADD-SLAM consistency masks (not used by the tracker yet):
-    the colour and depth thresholds are this many times the frame's median
-    error (ADD-SLAM: anything from 10× to 30× works).
+    ``mode`` chooses the masks whose pixels get zero correspondence confidence in BA:
+
+    * ``epipolar`` (with ``uncertainty.enable``): the pixels of a keyframe that the
+      dominant epipolar geometry of its edges cannot explain
+      (:mod:`droidw_cli.dynamics.epipolar`): Sampson distance above
+      ``epipolar_thresh`` working-resolution px on any edge, grown by
+      ``epipolar_dilate`` grid cells.  Off while the focal length is estimated
+      (``--calib auto``): on a real clip the masks took the focal length from
+      617 px to 17 px.
+    * ``consistency``: ADD-SLAM scene consistency (:mod:`droidw_cli.dynamics.inloop`):
+      each new keyframe's colour and depth are predicted from its
+      ``consistency_sources`` predecessors through the current poses and depths
+      (the sensor depth in RGB-D mode); pixels above ``tau_scale`` × the median
+      error that are nearer than predicted are seeds, grown to whole objects by
+      the ``segmenter`` plugin (``grow``: the built-in region grower).
+    * ``both``: the union; ``none``: no masks.
+
+    Object tracks (ids across keyframes) end when the centre comes within
+    ``track_border`` of the image border, the area grows more than
+    ``track_growth``× or the centre jumps more than ``track_jump`` of the width
+    between keyframes (ADD-SLAM's rules).
     """
 
-    epipolar: bool = True
+    mode: str = "epipolar"
     epipolar_thresh: float = 0.5
     epipolar_dilate: int = 2
     tau_scale: float = 20.0
+    consistency_sources: int = 3
+    segmenter: str = "grow"
+    track_border: float = 0.04
+    track_growth: float = 1.5
+    track_jump: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.mode not in DYNAMICS_MODES:
+            raise ValueError(f"dynamics.mode must be one of {', '.join(DYNAMICS_MODES)}, got {self.mode!r}")
+        if not self.tau_scale > 0:
+            raise ValueError(f"dynamics.tau_scale must be positive, got {self.tau_scale}")
+        if self.consistency_sources < 1:
+            raise ValueError(f"dynamics.consistency_sources must be >= 1, got {self.consistency_sources}")
+
+    @property
+    def epipolar(self) -> bool:
+        """Whether the epipolar masks are on (``epipolar`` or ``both``)."""
+        return self.mode in ("epipolar", "both")
+
+    @property
+    def consistency(self) -> bool:
+        """Whether the scene-consistency masks are on (``consistency`` or ``both``)."""
+        return self.mode in ("consistency", "both")
 
 
 @dataclass(frozen=True)

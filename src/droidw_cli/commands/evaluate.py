@@ -14,7 +14,8 @@ FORMAT_CHOICES = click.Choice(["auto", "tum", "kitti", "euroc"], case_sensitive=
 @click.option("--est", "est_path", default="traj.txt", show_default=True, metavar="FILE|RUN",
               help="Estimated trajectory, or a run folder containing traj.txt.")
 @click.option("--align", type=click.Choice(["sim3", "se3", "none"]), default="sim3", show_default=True,
-              help="Umeyama alignment before measuring: sim3 (with scale, for monocular), se3 or none.")
+              help="Umeyama alignment before measuring: sim3 (with scale, for monocular runs), se3 (for metric "
+                   "RGB-D runs, `track --depth`: run.json says \"metric\": true) or none.")
 @click.option("--max-diff", type=click.FloatRange(min=0.0), default=0.02, show_default=True, metavar="SECONDS",
               help="Largest timestamp difference for associating poses (nearest timestamp).")
 @click.option("--t-offset", type=float, default=0.0, show_default=True, metavar="SECONDS",

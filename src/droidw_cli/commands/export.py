@@ -23,14 +23,26 @@ def load_run(run_dir: Path) -> dict:
         raise InputError(f"{path}: cannot read keyframes ({exc})") from None
 
 
+def run_is_metric(run_dir: Path) -> bool:
+    """``run.json``'s ``metric`` flag (False when there is no readable run.json)."""
+    import json
+
+    path = (run_dir if run_dir.is_dir() else run_dir.parent) / "run.json"
+    try:
+        return bool(json.loads(path.read_text()).get("metric", False))
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
 @click.group("export")
 def export() -> None:
-    """Export a run: PLY point clouds, uncertainty overlays, a rendered view of the cloud.
+    """Export a run: PLY point clouds, dynamic objects, uncertainty overlays, a rendered view of the cloud.
 
     \b
     Examples:
       droidw export ply                      # inside a run folder: ./static.ply
       droidw export ply run/ --what dynamic --out dynamic.ply
+      droidw export objects run/ --out objects.json
       droidw export uncertainty run/ --out overlays/ --video
       droidw export render run/ --out cloud.png --what all
     """
@@ -49,8 +61,10 @@ def ply(run_dir, out, what, max_uncertainty, min_views, stride):
     """Write the keyframes' points as a binary PLY in world coordinates.
 
     The static cloud keeps points with low uncertainty that several views
-    agree on; the dynamic cloud holds the rest, each point with its keyframe
-    time (vertex property `time`).
+    agree on and that were never masked dynamic; the dynamic cloud holds the
+    masked points with their keyframe time and object id (vertex properties
+    `t`, `object_id`), so a viewer can play each object over time; `all`
+    writes both with a `dynamic` flag.
     """
     from droidw_cli.export.pointcloud import CloudParams, build_cloud, write_ply
 
@@ -63,11 +77,29 @@ def ply(run_dir, out, what, max_uncertainty, min_views, stride):
     if what == "static":
         part = cloud.select(cloud.static)
     elif what == "dynamic":
-        part = cloud.select(~cloud.static)
+        part = cloud.select(cloud.dynamic)
     else:
-        part = cloud
-    n = write_ply(out, part, with_time=what != "static")
+        part = cloud.select(cloud.static | cloud.dynamic)
+    n = write_ply(out, part, with_time=what != "static", with_flag=what == "all")
     click.echo(f"wrote {n} points to {out}")
+
+
+@export.command("objects")
+@click.argument("run_dir", type=click.Path(path_type=Path), default=Path("."), required=False)
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("objects.json"), show_default=True)
+def objects(run_dir, out):
+    """Write the run's dynamic objects as JSON: per object id its first and last frame and time, and per
+    keyframe its image centre and world centroid (schema in the README)."""
+    from droidw_cli.export.objects import format_objects, objects_json
+    from droidw_cli.io.trajectory import atomic_write_text
+
+    npz = load_run(run_dir)
+    try:
+        doc = objects_json(npz, run_is_metric(run_dir))
+    except ValueError as exc:
+        raise InputError(f"{run_dir}: {exc}") from None
+    atomic_write_text(out, format_objects(doc))
+    click.echo(f"wrote {len(doc['objects'])} objects to {out}")
 
 
 @export.command("uncertainty")

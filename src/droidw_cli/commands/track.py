@@ -16,10 +16,35 @@ def peak_memory_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def depth_config(config_name: str, overrides, depth: bool) -> tuple[str, tuple[str, ...]]:
+    """``--depth``: the ``rgbd`` config in place of ``default``, else ``io.use_depth=true`` on the chosen one."""
+    overrides = tuple(overrides)
+    if not depth:
+        return config_name, overrides
+    if config_name == "default":
+        return "rgbd", overrides
+    return config_name, ("io.use_depth=true", *overrides)
+
+
+def open_depth(source, depth_scale: float) -> None:
+    """Prepare ``source`` for an RGB-D run: its depth scale, and mis-sized depth images as errors."""
+    from droidw_cli.errors import InputError
+
+    if not depth_scale > 0:
+        raise InputError(f"--depth-scale must be positive, got {depth_scale:g}")
+    if not getattr(source, "has_depth", False):
+        raise InputError(f"{source.path}: RGB-D mode (--depth, config io.use_depth) needs depth images, and this "
+                         f"input has none (a TUM/Bonn folder lists them in depth.txt)")
+    source.depth_scale = float(depth_scale)
+    source.strict_depth = True
+
+
 def run_track(input_path, out_dir, calib=None, backend="auto", config_name="default", overrides=(),
-              stride=None, start=None, max_frames=None, progress=True, echo=click.echo):
+              stride=None, start=None, max_frames=None, progress=True, echo=click.echo, depth=False,
+              depth_scale=5000.0):
     """The work behind ``droidw track`` (also used by ``droidw demo`` and the benchmarks).
 
+    ``depth``: RGB-D mode (:func:`depth_config`); ``depth_scale``: depth PNG units per metre.
     Returns (TrackResult, list of written paths).
     """
     import dataclasses
@@ -35,6 +60,7 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
     from droidw_cli.io.frames import open_source
     from droidw_cli.slam.tracker import Tracker
 
+    config_name, overrides = depth_config(config_name, overrides, depth)
     cfg = load_config(config_name, overrides)
     io = cfg.io
     io = dataclasses.replace(io, **{k: v for k, v in (("stride", stride), ("start", start), ("max_frames", max_frames))
@@ -42,6 +68,8 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
     cfg = dataclasses.replace(cfg, io=io)
     torch.manual_seed(cfg.seed)
     source = open_source(input_path, stride=io.stride, start=io.start, max_frames=io.max_frames, fps=io.fps)
+    if io.use_depth:
+        open_depth(source, depth_scale)
     if calib is None:  # the calibration that came with the data, else estimate it
         calibration = source.intrinsics_hint
         if calibration is not None:
@@ -76,11 +104,17 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
                    "say which), cpu, cuda (see `droidw backends`).")
 @config_option
 @set_option
+@click.option("--depth", is_flag=True,
+              help="RGB-D mode: the sensor depth feeds the depth prior and fixes the metric scale (the same as "
+                   "--config rgbd; with another --config it adds io.use_depth=true).  Evaluate with --align se3.")
+@click.option("--depth-scale", type=float, default=5000.0, show_default=True,
+              help="Depth PNG units per metre (5000: TUM, Bonn).")
 @click.option("--stride", type=int, default=None, help="Use every N-th frame.")
 @click.option("--start", type=int, default=None, help="Skip the first N frames.")
 @click.option("--max-frames", type=int, default=None, help="Stop after N frames (0 = all).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def track(input_path, out_dir, calib, backend, config_name, overrides, stride, start, max_frames, quiet):
+def track(input_path, out_dir, calib, backend, config_name, overrides, depth, depth_scale, stride, start, max_frames,
+          quiet):
     """Track INPUT (a video, an image folder, a TUM/Bonn or EuRoC folder).
 
     Writes a camera-to-world pose for every input frame (TUM format, the
@@ -90,11 +124,12 @@ def track(input_path, out_dir, calib, backend, config_name, overrides, stride, s
     Examples:
       droidw track video.mp4 --calib auto --out run/
       droidw track rgbd_dataset_freiburg3_walking_xyz/ --calib calib.txt --config tum --out run/
+      droidw track rgbd_dataset_freiburg3_walking_xyz/ --calib calib.txt --depth --out run-rgbd/
       droidw track frames/ --set uncertainty.enable=false --out baseline/
     """
     progress = not quiet and sys.stderr.isatty()
     result, paths = run_track(input_path, out_dir, calib, backend, config_name, overrides, stride, start,
-                              max_frames, progress)
+                              max_frames, progress, depth=depth, depth_scale=depth_scale)
     for w in result.warnings:
         click.echo(f"droidw: warning: {w}", err=True)
     click.echo(f"{len(result.timestamps)} frames, {len(result.kf_index)} keyframes, "

@@ -73,8 +73,12 @@ class DynamicObjectTracker:
         self._next_id += 1
         return obj
 
-    def update(self, mask) -> list[TrackedObject]:
-        """Track the components of a (h, w) bool mask; returns the active objects of this frame."""
+    def update(self, mask, predicted: dict[int, tuple[float, float]] | None = None) -> list[TrackedObject]:
+        """Track the components of a (h, w) bool mask; returns the active objects of this frame.
+
+        ``predicted``: optional centre of some active tracks in this frame, used in place of
+        their previous centre for the match and the jump test.
+        """
         m = torch.as_tensor(np.asarray(mask.detach().cpu() if isinstance(mask, Tensor) else mask)).bool()
         if m.dim() != 2:
             raise ValueError(f"mask must be (h, w), got shape {tuple(m.shape)}")
@@ -88,6 +92,8 @@ class DynamicObjectTracker:
         new_active: dict[int, TrackedObject] = {}
         for tid in sorted(self.active):
             prev = self.active[tid]
+            if predicted is not None and tid in predicted:
+                prev = TrackedObject(prev.id, prev.mask, predicted[tid], prev.area)
             px, py = int(round(prev.centre[0])), int(round(prev.centre[1]))
             c = -1
             if 0 <= px < w and 0 <= py < h and labels[py, px] > 0 and not claimed[labels[py, px] - 1]:

@@ -1,11 +1,18 @@
-"""Keyframe point clouds from a run, split into static and dynamic points.
+"""Keyframe point clouds from a run: the dynamic-static composite map.
 
 Every 1/8-grid pixel p of keyframe k with disparity d becomes the world point
-X = G_k⁻¹ · Π⁻¹(p, d).  A point is **static** when its uncertainty u is under
-``max_uncertainty`` *and* several views agree on it: projected into the
-neighbouring keyframes k ± 1 … k ± ``radius``, its disparity matches theirs
-(bilinearly sampled) within ``rel_tol`` in at least ``min_views`` of them.
-Everything else is **dynamic**, tagged with its keyframe's time.
+X = G_k⁻¹ · Π⁻¹(p, d).  A run records M_k, every pixel of keyframe k that was
+ever masked dynamic, and the object id of each (``dynamic``, ``object_ids``
+in ``keyframes.npz``).
+
+* **static**: p ∉ M_k, its uncertainty u is under ``max_uncertainty``, *and*
+  several views agree on it: projected into the neighbouring keyframes
+  k ± 1 … k ± ``radius``, its disparity matches theirs (bilinearly sampled)
+  within ``rel_tol`` in at least ``min_views`` of them.
+* **dynamic**: p ∈ M_k, tagged with its keyframe's time t and its object id
+  (−1 where the mask has no tracked object).  A run without masks
+  (``dynamics.mode=none``) has no M_k; its dynamic points are then the
+  non-static ones.
 """
 
 from __future__ import annotations
@@ -38,16 +45,20 @@ class CloudParams:
 
 @dataclass(frozen=True)
 class Cloud:
-    """Points (P, 3) float32, colours (P, 3) uint8, keyframe time (P,), uncertainty (P,), static flag (P,)."""
+    """Points (P, 3) float32, colours (P, 3) uint8, keyframe time (P,), uncertainty (P,), static flag (P,),
+    dynamic flag (P,) and object id (P,) int32 (−1: none)."""
 
     xyz: np.ndarray
     rgb: np.ndarray
     time: np.ndarray
     uncertainty: np.ndarray
     static: np.ndarray
+    dynamic: np.ndarray
+    object_id: np.ndarray
 
     def select(self, mask: np.ndarray) -> "Cloud":
-        return Cloud(self.xyz[mask], self.rgb[mask], self.time[mask], self.uncertainty[mask], self.static[mask])
+        return Cloud(self.xyz[mask], self.rgb[mask], self.time[mask], self.uncertainty[mask], self.static[mask],
+                     self.dynamic[mask], self.object_id[mask])
 
 
 def _backproject(disps: torch.Tensor, k8: torch.Tensor) -> torch.Tensor:
@@ -104,23 +115,39 @@ def build_cloud(npz: dict, params: CloudParams) -> Cloud:
     times = np.broadcast_to(np.asarray(npz["timestamps"], dtype=np.float64)[:, None, None], (kf, h, w))
     seen = unc if not (params.relative and "uncertainty" in npz) else weighting_input(torch.from_numpy(unc), "relative").numpy()
     static = (seen < params.max_uncertainty) & (support >= params.min_views)
+    if "dynamic" in npz:
+        dynamic = np.asarray(npz["dynamic"], dtype=bool)
+        ids = np.asarray(npz["object_ids"], dtype=np.int32)
+        static &= ~dynamic
+    else:
+        dynamic, ids = ~static, np.full(static.shape, -1, dtype=np.int32)
     keep = np.zeros(kf, dtype=bool)
     keep[:: max(1, params.stride)] = True
     sel = np.broadcast_to(keep[:, None, None], (kf, h, w))
-    return Cloud(world[sel].astype(np.float32), rgb[sel].astype(np.uint8), times[sel].copy(), unc[sel].copy(), static[sel].copy())
+    return Cloud(world[sel].astype(np.float32), rgb[sel].astype(np.uint8), times[sel].copy(), unc[sel].copy(),
+                 static[sel].copy(), dynamic[sel].copy(), ids[sel].copy())
 
 
-def write_ply(path, cloud: Cloud, with_time: bool) -> int:
-    """Write a binary little-endian PLY (x y z red green blue [time uncertainty]); returns the point count."""
+def write_ply(path, cloud: Cloud, with_time: bool, with_flag: bool = False) -> int:
+    """Write a binary little-endian PLY; returns the point count.
+
+    Vertex properties: ``x y z red green blue``; with ``with_time`` also
+    ``t`` (keyframe time, s), ``object_id`` (int, −1 none) and ``uncertainty``;
+    with ``with_flag`` also ``dynamic`` (uchar 0/1).
+    """
     fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("red", "u1"), ("green", "u1"), ("blue", "u1")]
     if with_time:
-        fields += [("time", "<f8"), ("uncertainty", "<f4")]
+        fields += [("t", "<f8"), ("object_id", "<i4"), ("uncertainty", "<f4")]
+    if with_flag:
+        fields += [("dynamic", "u1")]
     data = np.empty(len(cloud.xyz), dtype=fields)
     data["x"], data["y"], data["z"] = cloud.xyz[:, 0], cloud.xyz[:, 1], cloud.xyz[:, 2]
     data["red"], data["green"], data["blue"] = cloud.rgb[:, 0], cloud.rgb[:, 1], cloud.rgb[:, 2]
     if with_time:
-        data["time"], data["uncertainty"] = cloud.time, cloud.uncertainty
-    ply_types = {"<f4": "float", "u1": "uchar", "<f8": "double"}
+        data["t"], data["object_id"], data["uncertainty"] = cloud.time, cloud.object_id, cloud.uncertainty
+    if with_flag:
+        data["dynamic"] = cloud.dynamic.astype(np.uint8)
+    ply_types = {"<f4": "float", "u1": "uchar", "<f8": "double", "<i4": "int"}
     header = ["ply", "format binary_little_endian 1.0", "comment written by droidw", f"element vertex {len(data)}"]
     header += [f"property {ply_types[t]} {n}" for n, t in fields] + ["end_header"]
     atomic_write_bytes(path, ("\n".join(header) + "\n").encode("ascii") + data.tobytes())

@@ -156,7 +156,7 @@ def log_run(rec, run: Run, progress: bool = False, stride: int = 1) -> dict:
     for k in tqdm(range(len(kf_index)), desc="keyframes", unit="kf", disable=not progress, leave=False):
         at(kf_index[k], kf_times[k])
         rec.log("world/camera/image", rr.Image(images[k]))
-        dyn = (~cloud.static) & (cloud.time == kf_times[k])
+        dyn = cloud.dynamic & (cloud.time == kf_times[k])
         rec.log("world/points/dynamic", rr.Points3D(cloud.xyz[dyn], colors=[DYNAMIC_COLOUR], radii=[-2.0]))
         dynamic_total += int(dyn.sum())
         if unc is not None:

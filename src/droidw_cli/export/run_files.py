@@ -37,6 +37,10 @@ def keyframe_arrays(result) -> dict[str, np.ndarray]:
         "images": result.kf_images,
         "confidence": result.kf_confidence.astype(np.float16),
     }
+    if result.kf_dynamic is not None:
+        arrays["dynamic"] = result.kf_dynamic.astype(bool)
+        arrays["object_ids"] = result.kf_object_ids.astype(np.int32)
+        arrays["objects"] = result.objects.astype(np.float64)
     if result.kf_uncertainty is not None:
         arrays["uncertainty"] = result.kf_uncertainty.astype(np.float32)
         arrays["features"] = result.kf_features
@@ -60,6 +64,9 @@ def run_info(result, config: dict, backend: str, source: str, peak_mb: float) ->
         "frames": int(len(result.timestamps)),
         "keyframes": int(len(result.kf_index)),
         "initialised": bool(result.initialised),
+        "metric": bool(result.metric),
+        "scale": ("metric: sensor depth fixes the scale; evaluate with --align se3" if result.metric
+                  else "arbitrary (monocular); evaluate with --align sim3"),
         "calibration": {"fx": result.calibration.fx, "fy": result.calibration.fy,
                         "cx": result.calibration.cx, "cy": result.calibration.cy},
         "intrinsics_working": [float(v) for v in result.intrinsics_work],

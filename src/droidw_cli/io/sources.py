@@ -80,6 +80,7 @@ class ListSource(FrameSource):
 
     depth_scale = 5000.0  # uint16 depth PNG units per metre (TUM / Bonn)
     load_depth = True  # False: skip decoding the depth PNGs (a monocular run does not read them)
+    strict_depth = False  # True (RGB-D runs): a depth image whose size differs from its frame is an error
 
     def __init__(self, path: Path, selection: Selection, fps: float, entries: Sequence[Entry]) -> None:
         super().__init__(path, selection, fps)
@@ -117,6 +118,9 @@ class ListSource(FrameSource):
             depth = None
             if entry.depth is not None and self.load_depth:
                 depth = decode_depth(entry.depth, self.depth_scale)
+                if self.strict_depth and depth is not None and depth.shape != img.shape[:2]:
+                    raise InputError(f"{entry.depth}: depth image is {depth.shape[1]}x{depth.shape[0]}, its frame "
+                                     f"{entry.rgb.name} is {img.shape[1]}x{img.shape[0]}")
                 if depth is None or depth.shape != self.size:
                     warn_corrupt(f"{entry.depth}: unreadable or mis-sized depth; frame {k} kept without depth")
                     depth = None

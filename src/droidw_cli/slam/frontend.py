@@ -20,11 +20,15 @@ Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distanc
   edges and the second round of ``iters2`` iterations is skipped, so a camera
   that slows down or stops adds no keyframes.  The oldest two keyframes of a
   window that does not start at 0 stay fixed (gauge and scale).
-* With the uncertainty on (and ``dynamics.epipolar``), every edge loses the
+* With the uncertainty on (and ``dynamics.mode`` epipolar|both), every edge loses the
   pixels of its keyframe that the dominant epipolar geometry cannot explain
   (:mod:`droidw_cli.dynamics.epipolar`).  The learned uncertainty reads the
   map, so it cannot find movers that the map was built on: during
   initialisation, or when a mover walks in.
+* With ``dynamics.mode`` consistency|both, each keyframe also loses the pixels
+  of its scene-consistency objects (:mod:`droidw_cli.dynamics.inloop`),
+  detected for the initial keyframes after initialisation and for each new
+  keyframe after its first ``iters1`` iterations.
 
 The keyframe buffer, the edge cache, θ and the intrinsics live on the BA
 backend's device (``backend.device``); images and DIS flow stay on the host,
@@ -42,6 +46,7 @@ from droidw_cli.ba.interface import BABackend
 from droidw_cli.ba.params import BAParams
 from droidw_cli.config import TrackConfig
 from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask
+from droidw_cli.dynamics.inloop import KeyframeMasks, observed_disparity
 from droidw_cli.slam import graph
 from droidw_cli.slam.distance import frame_distance, transfer_disparity
 from droidw_cli.slam.evidence import EVIDENCE_CHANNELS, evidence_maps
@@ -81,6 +86,10 @@ class Frontend:
         self._segmenting = (cfg.dynamics.epipolar and params.uncertainty.enable and feature_channels > 0
                             and params.optimize_focal == "none")
         self._epipolar: dict[tuple[int, int], tuple[np.ndarray, torch.Tensor]] = {}
+        # dynamic masks of every keyframe (scene consistency with dynamics.mode consistency|both)
+        self.masks = KeyframeMasks(cfg.dynamics, grid, cfg.dynamics.consistency)
+        self._raw: dict[tuple[int, int], torch.Tensor] = {}  # raw confidences, while masks may change
+        self._masking = self._segmenting or cfg.dynamics.consistency
         h, w = grid
         ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32), indexing="ij")
         self.grid_coords = torch.stack([xs, ys], -1)  # on the host, with the flow
@@ -132,34 +141,56 @@ class Frontend:
             for key, c in results:
                 done.add(key)
                 self._store(key, c)
-        if self._segmenting:
+        if self._masking:
             self._mask_movers({i for i, _ in todo})
 
     def _store(self, key: tuple[int, int], c) -> None:
         self.cache.put(*key, c.target, c.weight, born=self.shared.iterations)
+        if self._masking:
+            self._raw[key] = c.weight
         if self._segmenting:
             d = epipolar_distance(c.flow, c.weight[..., 0].numpy())
             if d is not None:
                 self._epipolar[key] = (d, c.weight)
 
     def _mask_movers(self, frames: set[int]) -> None:
-        """Zero the confidence of the epipolar movers of these keyframes' outgoing edges.
+        """Zero the confidence of the masked pixels of these keyframes' outgoing edges.
 
-        The mask of keyframe i is recomputed from all its edges so far, always
-        applied to the raw confidences.  A mask over ``MAX_MOVING`` of the view
-        means no dominant rigid motion was found; that keyframe is left alone.
+        The mask of keyframe i is its scene-consistency mask (``dynamics.mode``
+        consistency|both) joined with its epipolar mask (epipolar|both), which
+        is recomputed from all its edges so far; it is always applied to the
+        raw confidences.  An epipolar mask over ``MAX_MOVING`` of the view means
+        no dominant rigid motion was found; it is left out.
         """
         d = self.cfg.dynamics
         for i in frames:
-            mine = [(key, w) for key, (_, w) in self._epipolar.items() if key[0] == i]
+            mine = [(key, w) for key, w in self._raw.items()
+                    if key[0] == i and (d.consistency or key in self._epipolar)]
             if not mine:
                 continue
-            moving = moving_mask([self._epipolar[key][0] for key, _ in mine], d.epipolar_thresh, d.epipolar_dilate)
-            if moving.mean() > MAX_MOVING:
-                moving[:] = False
-            keep = torch.from_numpy(~moving).float()[..., None]
+            masked = self.masks.current[i].numpy().copy()
+            epi = [self._epipolar[key][0] for key, _ in mine if key in self._epipolar]
+            if self._segmenting and epi:
+                moving = moving_mask(epi, d.epipolar_thresh, d.epipolar_dilate)
+                if moving.mean() > MAX_MOVING:
+                    moving[:] = False
+                self.masks.record(i, moving)
+                masked |= moving
+            keep = torch.from_numpy(~masked).float()[..., None]
             for (a, b), w in mine:
                 self.cache.put(a, b, self.cache.targets[(a, b)][0], w * keep)
+
+    def _detect(self, frames: list[int]) -> None:
+        """Scene-consistency masks of these keyframes under the current poses and depths, applied to BA."""
+        if not self.cfg.dynamics.consistency:
+            return
+        buf = self.buffer
+        n = len(buf)
+        disps = observed_disparity(buf.disps[:n], buf.depth_prior[:n] if buf.has_prior else None)
+        for k in frames:
+            objects = self.masks.detect(k, buf.poses[:n], disps, self.shared.intrinsics, self.masks.sources(k, n))
+            self.masks.set_current(k, None if objects is None else objects.mask)
+        self._mask_movers(set(frames))
 
     def _optimise(self, lo: int, hi: int, pairs: list[tuple[int, int]], iters: int) -> float:
         edges = self.cache.edge_set(pairs, offset=lo)
@@ -188,6 +219,7 @@ class Frontend:
             pose, disp = torch.tensor([0, 0, 0, 0, 0, 0, 1.0]), 1.0
         buf.append(frame_index, timestamp, pose, disp, thumbnail, features, depth_prior)
         self.images[k] = image
+        self.masks.append(image, timestamp)
         if not self.initialised:
             if self._ready(k):
                 self._initialise()
@@ -217,6 +249,7 @@ class Frontend:
             self._match(pairs, use_prior=m >= 3)
             self._optimise(0, m, pairs, 4 if m < n else f.init_iters)
         self._optimise(0, n, graph.init_pairs(n, init_radius), f.iters1 + f.iters2)
+        self._detect(list(range(n)))
         self.initialised = True
 
     def _proximity(self, k: int, lo: int) -> list[tuple[int, int]]:
@@ -242,7 +275,9 @@ class Frontend:
             if self.on_remove is not None:
                 self.on_remove(k - 1)
             self._remove(k - 1)
+            self._detect([k - 1])
             return k - 1
+        self._detect([k])
         self._window_ba(lo, k, f.iters2)
         return k
 
@@ -256,12 +291,14 @@ class Frontend:
         """Keyframe removal: drop keyframe k with its edges and renumber the later ones."""
         self.buffer.remove(k)
         self.cache.remove_frame(k)
+        self.masks.remove(k)
 
         def renumber(i: int) -> int:
             return i - (i > k)
 
         self.images = {renumber(i): v for i, v in self.images.items() if i != k}
         self._epipolar = {(renumber(a), renumber(b)): v for (a, b), v in self._epipolar.items() if k not in (a, b)}
+        self._raw = {(renumber(a), renumber(b)): v for (a, b), v in self._raw.items() if k not in (a, b)}
 
     def evidence(self) -> torch.Tensor | None:
         """Evidence channels of every keyframe from all cached edges (None when unused)."""
@@ -280,3 +317,5 @@ class Frontend:
             del self.images[old]
         for key in [key for key in self._epipolar if key[0] <= k - self.fcfg.window]:
             del self._epipolar[key]
+        for key in [key for key in self._raw if key[0] <= k - self.fcfg.window]:
+            del self._raw[key]

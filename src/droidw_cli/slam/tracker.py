@@ -22,6 +22,8 @@ from tqdm import tqdm
 
 from droidw_cli.ba.interface import BABackend
 from droidw_cli.config import TrackConfig
+from droidw_cli.dynamics.inloop import observed_disparity
+from droidw_cli.dynamics.objects import DynamicRecord, finish
 from droidw_cli.errors import InputError
 from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics, unscale_intrinsics
 from droidw_cli.io.calibration import Calibration
@@ -54,9 +56,13 @@ class TrackResult:
     kf_uncertainty: np.ndarray | None  # (K, h, w)
     kf_features: np.ndarray | None  # (K, C, h, w) float16
     kf_confidence: np.ndarray  # (K, h, w) mean edge confidence of each pixel
+    kf_dynamic: np.ndarray | None  # (K, h, w) bool: every pixel ever masked dynamic (None: dynamics.mode none)
+    kf_object_ids: np.ndarray | None  # (K, h, w) int32 object id, −1 none
+    objects: np.ndarray | None  # (M, 8) keyframe, id, centre x, y (input px), world centroid x, y, z, area
     theta: np.ndarray | None
     initialised: bool
     calibration_estimated: bool = False
+    metric: bool = False  # the scale comes from sensor depth (RGB-D)
     timings: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     wall_time: float = 0.0
@@ -73,6 +79,23 @@ def _source_calibration(k_work: np.ndarray, preparer: FramePreparer) -> Calibrat
     oy, ox = preparer.offset
     fx, fy, cx, cy = (float(v) for v in k_work)
     return Calibration(fx / sx, fy / sy, (cx + ox + 0.5) / sx - 0.5, (cy + oy + 0.5) / sy - 0.5)
+
+
+def _dynamic_record(fe: Frontend, preparer: FramePreparer) -> DynamicRecord | None:
+    """Final dynamic masks and objects of the run, object centres in input-image pixels (None: masks off)."""
+    if fe.cfg.dynamics.mode == "none":
+        return None
+    buf = fe.buffer
+    n = len(buf)
+    disps = observed_disparity(buf.disps[:n], buf.depth_prior[:n] if buf.has_prior else None)
+    rec = finish(fe.masks, buf.poses[:n], disps, fe.shared.intrinsics, fe.cfg.dynamics)
+    (sh, sw), (rh, rw) = preparer.src_size, preparer.resized_size
+    oy, ox = preparer.offset
+    table = rec.table.copy()
+    for col, off, scale in ((2, ox, rw / sw), (3, oy, rh / sh)):  # grid px → working px → input px
+        work = (table[:, col] + 0.5) * BA_SCALE - 0.5
+        table[:, col] = (work + off + 0.5) / scale - 0.5
+    return DynamicRecord(rec.masks, rec.ids, table)
 
 
 def _confidence(frontend: Frontend) -> torch.Tensor:
@@ -208,6 +231,8 @@ class Tracker:
                 )
             with timer("global_ba"):
                 gba.finish()
+            with timer("dynamics"):
+                dyn = _dynamic_record(fe, preparer)
 
             evidence = fe.evidence()
             unc = _keyframe_uncertainty(fe, evidence)
@@ -239,9 +264,13 @@ class Tracker:
             kf_uncertainty=None if unc is None else unc.cpu().numpy(),
             kf_features=feats_np,
             kf_confidence=_confidence(fe).cpu().numpy(),
+            kf_dynamic=None if dyn is None else dyn.masks,
+            kf_object_ids=None if dyn is None else dyn.ids,
+            objects=None if dyn is None else dyn.table,
             theta=theta,
             initialised=fe.initialised,
             calibration_estimated=auto,
+            metric=bool(buf.has_prior),
             timings=timer.as_dict(),
             warnings=list(dict.fromkeys(collected)),
             wall_time=wall,

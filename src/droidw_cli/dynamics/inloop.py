@@ -1,0 +1,135 @@
+"""Dynamic masks inside the tracker: scene consistency per new keyframe, the masks of every keyframe.
+
+:class:`KeyframeMasks` lives beside the frontend's keyframe buffer (same
+indices, renumbered on keyframe removal).  Per keyframe k it keeps the colour
+on the 1/8 grid and M_k, the union of every dynamic mask its pixels were ever
+given (scene consistency, epipolar), which is what BA zeroes and what the
+static map leaves out.
+
+Scene consistency for a new keyframe k (ADD-SLAM, with the map's render
+replaced by the reprojection of earlier keyframes), with S = the
+``consistency_sources`` keyframes before k:
+
+    Î_s, D̂_s = predict_views(k ← s)                        (warp.py)
+    M_ic^d   = inconsistency(I_k, D_k, Î, D̂; τ = k_τ · median)  (consistency.py, k_τ = tau_scale = 20)
+    objects  = segmenter.segment(M_ic^d, I_k, D_k)          (segmenter.py; built-in: region growing)
+
+D is the sensor depth where the run has one (RGB-D: metric, zero = unknown,
+so those pixels are never flagged) and the current BA depth 1/d otherwise.
+Poses are the current window estimates.  A mask covering more than
+``MAX_MASKED`` of the view means the prediction itself failed (a poor pose
+early on); such a mask is dropped, as the epipolar masks are.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import torch
+from torch import Tensor
+
+from droidw_cli.config import DynamicsConfig
+from droidw_cli.dynamics.consistency import inconsistency
+from droidw_cli.dynamics.params import DetectionParams
+from droidw_cli.dynamics.refine import Objects
+from droidw_cli.dynamics.segmenter import get_segmenter
+from droidw_cli.dynamics.warp import predict_views
+
+#: a consistency mask over this share of the view is taken for a failed prediction and dropped
+MAX_MASKED = 0.5
+
+
+def grid_image(image: np.ndarray, grid: tuple[int, int]) -> Tensor:
+    """Working-size RGB uint8 (H, W, 3) → (h, w, 3) float32 in [0, 1] on the BA grid (area average)."""
+    small = cv2.resize(image, (grid[1], grid[0]), interpolation=cv2.INTER_AREA)
+    return torch.from_numpy(small.astype(np.float32) / 255.0)
+
+
+def observed_disparity(disps: Tensor, prior: Tensor | None) -> Tensor:
+    """The disparity the consistency test trusts: the sensor's where a prior exists (0 = unknown), else BA's."""
+    return disps if prior is None else prior
+
+
+class KeyframeMasks:
+    """Dynamic masks of the keyframes, and scene-consistency detection for new ones.
+
+    ``consistency`` False keeps only the record (for the epipolar masks and the map).
+    """
+
+    def __init__(self, cfg: DynamicsConfig, grid: tuple[int, int], consistency: bool,
+                 params: DetectionParams | None = None) -> None:
+        self.cfg = cfg
+        self.grid = grid
+        self.consistency = consistency
+        self.params = params or DetectionParams()
+        self.segmenter = get_segmenter(cfg.segmenter, self.params) if consistency else None
+        self.images: list[Tensor] = []
+        self.masks: list[Tensor] = []  # union of every mask ever given (the map leaves these out)
+        self.current: list[Tensor] = []  # the latest consistency mask (BA zeroes these)
+        self.times: list[float] = []  # keyframe timestamps (object motion over time)
+
+    def __len__(self) -> int:
+        return len(self.masks)
+
+    def append(self, image: np.ndarray, timestamp: float | None = None) -> None:
+        """Register a new keyframe (its working-size image and timestamp)."""
+        self.images.append(grid_image(image, self.grid))
+        self.times.append(float(len(self.times) if timestamp is None else timestamp))
+        self.masks.append(torch.zeros(self.grid, dtype=torch.bool))
+        self.current.append(torch.zeros(self.grid, dtype=torch.bool))
+
+    def remove(self, k: int) -> None:
+        """Keyframe removal: drop k, the later keyframes move down by one (a k never registered is ignored)."""
+        if k >= len(self.masks):
+            return
+        del self.images[k]
+        del self.masks[k]
+        del self.current[k]
+        del self.times[k]
+
+    def record(self, k: int, mask: Tensor | np.ndarray) -> None:
+        """Add ``mask`` (h, w) to keyframe k's union of dynamic masks."""
+        self.masks[k] |= torch.as_tensor(np.asarray(mask, dtype=bool))
+
+    def set_current(self, k: int, mask: Tensor | None) -> None:
+        """Keyframe k's consistency mask for BA is now ``mask`` (None: no mask); it also joins the record."""
+        self.current[k] = torch.zeros(self.grid, dtype=torch.bool) if mask is None else mask.detach().cpu().bool()
+        self.masks[k] |= self.current[k]
+
+    def sources(self, k: int, n: int) -> list[int]:
+        """The ``consistency_sources`` keyframes before k (after k for the first keyframe) among the first n."""
+        m = self.cfg.consistency_sources
+        before = list(range(max(0, k - m), k))
+        return before if before else list(range(k + 1, min(n, k + 1 + m)))
+
+    def detect(self, k: int, poses_w2c: Tensor, disps: Tensor, intrinsics: Tensor,
+               sources: list[int]) -> Objects | None:
+        """Scene-consistency objects of keyframe k against ``sources``; None when not usable.
+
+        ``poses_w2c`` (K, 7), ``disps`` (K, h, w) (observed disparities, see
+        :func:`observed_disparity`) and ``intrinsics`` (4,) of the grid, any device.
+        """
+        if not sources or self.segmenter is None:
+            return None
+        idx = [*sources, k]
+        images = torch.stack([self.images[i] for i in idx])
+        d = disps[idx].detach().float().cpu()
+        g = poses_w2c[idx].detach().float().cpu()
+        kk = intrinsics.detach().float().cpu()
+        t = len(sources)
+        pred_rgb, pred_disp, valid = predict_views(images, d, g, kk, t, list(range(t)), self.params.min_depth,
+                                                   self.params.depth_mode)
+        maps = inconsistency(images[t], d[t], pred_rgb, pred_disp, valid, self.cfg.tau_scale, self.params)
+        if float(maps.m_dyn.float().mean()) > MAX_MASKED:
+            return None
+        depth = torch.where(d[t] > 0, 1.0 / d[t].clamp(min=1e-6), torch.zeros_like(d[t]))
+        objects = self.segmenter.segment(maps.m_dyn, images[t], depth)
+        if float(objects.mask.float().mean()) > MAX_MASKED:
+            return None
+        return objects
+
+    def stacked(self) -> np.ndarray:
+        """(K, h, w) bool: every keyframe's union mask."""
+        if not self.masks:
+            return np.zeros((0, *self.grid), dtype=bool)
+        return torch.stack(self.masks).numpy().copy()

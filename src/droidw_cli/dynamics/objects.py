@@ -1,0 +1,200 @@
+"""Dynamic objects of a finished run: final masks, ids over the keyframes, centres and 3D centroids.
+
+After the global BA (:func:`finish`):
+
+1. With scene consistency on, every keyframe is checked once more under
+   the final poses, against up to ``consistency_sources`` keyframes on *each*
+   side (the online check only had predecessors).  A keyframe's dynamic mask
+   M_k is the union of that result and every mask it was given online
+   (consistency, epipolar): the static map leaves all of it out.
+2. Object ids (:class:`~droidw_cli.dynamics.tracker.DynamicObjectTracker`,
+   ADD-SLAM's rules: a track ends at the border, on an area jump or a centre
+   jump) over the keyframes in order.  Keyframes lie several frames apart, so
+   an object's previous centre c (keyframe j) is first carried into the new
+   keyframe k by the image motion of its world centroid X̄, moved on to X̄' at
+   its constant world velocity from the two keyframes before when it has them:
+   c' = c + Π(G_k X̄') − Π(G_j X̄).  Matching and the jump test use c'.  An
+   active object that finds no mask at c' is *propagated* from c': the 3 × 3
+   pixels at c' prompt the segmenter when the new keyframe there still looks
+   like the object (depth within ``depth_rel_tol`` of its median depth δ,
+   colour within max(``color_tol``, ``color_spread`` σ) of its mean colour μ),
+   and the grown region is kept when its area is within ``track_growth``× of
+   the object's last area either way.
+3. Per object and keyframe: the image centre (inscribed circle, mapped to the
+   input image's pixels by the caller) and the world centroid
+
+       X̄ = (1/|O|) Σ_{p∈O} G_k⁻¹ · (D_p K⁻¹ p̃),
+
+   with D the observed depth (the sensor's in RGB-D mode, else 1/d from BA).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from droidw_cli.config import DynamicsConfig
+from droidw_cli.dynamics.inloop import KeyframeMasks
+from droidw_cli.dynamics.tracker import DynamicObjectTracker
+from droidw_cli.slam.poses import invert, to_matrix
+
+#: columns of :attr:`DynamicRecord.table`
+TABLE_COLUMNS = ("keyframe", "id", "cx", "cy", "x", "y", "z", "area")
+
+
+@dataclass(frozen=True)
+class DynamicRecord:
+    """Per keyframe: ``masks`` (K, h, w) bool, ``ids`` (K, h, w) int32 (−1: no object);
+    ``table`` (M, 8) float64 rows of :data:`TABLE_COLUMNS` (centre in grid px, centroid in world metres)."""
+
+    masks: np.ndarray
+    ids: np.ndarray
+    table: np.ndarray
+
+
+def _depth(disp: Tensor) -> Tensor:
+    return torch.where(disp > 0, 1.0 / disp.clamp(min=1e-6), torch.zeros_like(disp))
+
+
+def _stats(image: Tensor, depth: Tensor, mask: Tensor) -> tuple[Tensor, float, float] | None:
+    """(mean colour μ, RMS spread σ, median depth δ) of the object's pixels with known depth."""
+    ok = mask & (depth > 0)
+    if not bool(ok.any()):
+        return None
+    cols = image[ok]
+    mu = cols.mean(0)
+    return mu, float(((cols - mu) ** 2).sum(-1).mean().sqrt()), float(depth[ok].median())
+
+
+def _project(x: np.ndarray, c2w: np.ndarray, kk: Tensor) -> np.ndarray | None:
+    """Grid pixel (2,) of world point x in a camera (None behind it)."""
+    p = c2w[:3, :3].T @ (x - c2w[:3, 3])
+    if p[2] <= 1e-3:
+        return None
+    fx, fy, cx, cy = (float(v) for v in kk)
+    return np.array([fx * p[0] / p[2] + cx, fy * p[1] / p[2] + cy])
+
+
+def _predict(history: dict[int, list[tuple[int, np.ndarray]]], tracker: DynamicObjectTracker, times: np.ndarray,
+             k: int, c2w: np.ndarray, kk: Tensor, hw: tuple[int, int]) -> dict[int, tuple[float, float]]:
+    """Centre c' (grid px) in keyframe k (camera-to-world poses ``c2w`` (K, 4, 4)) of each active object with a world centroid (see step 2).
+
+    c' = c + Π_k(X̄') − Π_j(X̄): the previous centre c (keyframe j) moved by the image motion of
+    the centroid, because the inscribed-circle centre and the centroid's projection differ.
+    """
+    out = {}
+    for tid, obj in tracker.active.items():
+        seen = history.get(tid)
+        if not seen:
+            continue
+        k1, x1 = seen[-1]
+        x = x1
+        if len(seen) >= 2 and times[k1] > times[seen[-2][0]]:
+            k0, x0 = seen[-2]
+            x = x1 + (x1 - x0) * (times[k] - times[k1]) / (times[k1] - times[k0])
+        a, b = _project(x1, c2w[k1], kk), _project(x, c2w[k], kk)
+        if a is None or b is None:
+            continue
+        u, v = obj.centre[0] + b[0] - a[0], obj.centre[1] + b[1] - a[1]
+        if 0 <= u <= hw[1] - 1 and 0 <= v <= hw[0] - 1:
+            out[tid] = (float(u), float(v))
+    return out
+
+
+def _propagate(masks: KeyframeMasks, mask: Tensor, image: Tensor, depth: Tensor, tracker: DynamicObjectTracker,
+               stats: dict[int, tuple[Tensor, float, float]], cfg: DynamicsConfig,
+               predicted: dict[int, tuple[float, float]]) -> Tensor:
+    """``mask`` plus the objects grown from the (predicted) centres of active tracks it misses."""
+    if masks.segmenter is None or not tracker.active:
+        return mask
+    h, w = mask.shape
+    p = masks.params
+    out = mask.clone()
+    for tid, obj in sorted(tracker.active.items()):  # a handful of objects
+        centre = predicted.get(tid, obj.centre)
+        x, y = int(round(centre[0])), int(round(centre[1]))
+        if not (0 <= x < w and 0 <= y < h) or bool(mask[y, x]) or tid not in stats:
+            continue
+        mu, sigma, delta = stats[tid]
+        d = float(depth[y, x])
+        colour_ok = float((image[y, x] - mu).norm()) <= max(p.color_tol, p.color_spread * sigma)
+        if d <= 0 or abs(d - delta) > p.depth_rel_tol * delta or not colour_ok:
+            continue
+        seed = torch.zeros_like(mask)  # a 3 × 3 prompt at the centre (a seed needs min_seed_area pixels)
+        seed[max(0, y - 1):y + 2, max(0, x - 1):x + 2] = True
+        grown = masks.segmenter.segment(seed, image, depth).mask & ~out
+        area = int(grown.sum())
+        if obj.area / cfg.track_growth <= area <= obj.area * cfg.track_growth:
+            out |= grown
+    return out
+
+
+def final_pass(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsics: Tensor,
+               cfg: DynamicsConfig) -> None:
+    """Step 1: scene consistency of every keyframe under the final poses, both sides; joins the record."""
+    n = len(masks)
+    if not masks.consistency:
+        return
+    g = poses_w2c[:n].detach().float().cpu()
+    d = disps_obs[:n].detach().float().cpu()
+    m = cfg.consistency_sources
+    for k in range(n):
+        sources = [j for j in range(k - m, k + m + 1) if j != k and 0 <= j < n]
+        objects = masks.detect(k, g, d, intrinsics, sources)
+        if objects is not None:
+            masks.record(k, objects.mask)
+
+
+def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsics: Tensor,
+                  cfg: DynamicsConfig) -> DynamicRecord:
+    """Steps 2-3: propagation, ids, and per object and keyframe its centre and world centroid."""
+    n = len(masks)
+    h, w = masks.grid
+    g = poses_w2c[:n].detach().double().cpu()
+    d = disps_obs[:n].detach().float().cpu()
+    kk = intrinsics.detach().double().cpu()
+    tracker = DynamicObjectTracker(border=cfg.track_border, max_growth=cfg.track_growth, max_jump=cfg.track_jump,
+                                   min_area=masks.params.min_object_area)
+    ids = np.full((n, h, w), -1, dtype=np.int32)
+    rows: list[list[float]] = []
+    stats: dict[int, tuple[Tensor, float, float]] = {}
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    rays = np.stack([(gx - float(kk[2])) / float(kk[0]), (gy - float(kk[3])) / float(kk[1]), np.ones_like(gx)], -1)
+    c2w = to_matrix(invert(g)) if n else np.zeros((0, 4, 4))
+    history: dict[int, list[tuple[int, np.ndarray]]] = {}  # id → (keyframe, world centroid) so far
+    times = np.asarray(masks.times, dtype=np.float64)
+    for k in range(n):
+        depth = _depth(d[k])
+        predicted = _predict(history, tracker, times, k, c2w, kk, (h, w))
+        mask = _propagate(masks, masks.masks[k], masks.images[k], depth, tracker, stats, cfg, predicted)
+        masks.masks[k] = mask
+        objs = tracker.update(mask, predicted)
+        stats = {}
+        depth_np = depth.numpy().astype(np.float64)
+        for obj in objs:
+            ids[k][obj.mask] = obj.id
+            s = _stats(masks.images[k], depth, torch.from_numpy(obj.mask))
+            if s is not None:
+                stats[obj.id] = s
+            ok = obj.mask & (depth_np > 0)
+            centroid = np.full(3, np.nan)
+            if ok.any():
+                world = (rays[ok] * depth_np[ok][:, None]) @ c2w[k, :3, :3].T + c2w[k, :3, 3]
+                centroid = world.mean(0)
+                history.setdefault(obj.id, []).append((k, centroid))
+            rows.append([k, obj.id, obj.centre[0], obj.centre[1], *centroid, obj.area])
+    table = np.array(rows, dtype=np.float64).reshape(-1, len(TABLE_COLUMNS))
+    return DynamicRecord(masks.stacked(), ids, table)
+
+
+def finish(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsics: Tensor,
+           cfg: DynamicsConfig) -> DynamicRecord:
+    """Final masks, object ids and per-keyframe object centres and centroids (see the module docstring).
+
+    ``poses_w2c`` (K, 7), ``disps_obs`` (K, h, w) observed disparities, ``intrinsics`` (4,) of the grid.
+    """
+    final_pass(masks, poses_w2c, disps_obs, intrinsics, cfg)
+    return track_objects(masks, poses_w2c, disps_obs, intrinsics, cfg)
