@@ -121,3 +121,18 @@ def test_keyframe_removal_renumbers_buffer_and_edges():
     assert sorted(cache.pairs()) == [(0, 1), (2, 1)]
     assert cache.young_pairs(now=50, max_age=50) == cache.pairs()
     assert cache.young_pairs(now=56, max_age=50) == []
+
+
+def test_archived_keyframes_keep_u_and_confidence_but_not_features():
+    buf = KeyframeBuffer((6, 8), feature_channels=4)
+    for k in range(5):
+        buf.append(k, k / 30.0, _pose(), 1.0, np.zeros((2, 2, 3), np.uint8), features=torch.full((4, 6, 8), float(k)))
+    buf.archive(0, torch.full((6, 8), 0.25), torch.full((6, 8), 0.5))
+    buf.archive(1, torch.full((6, 8), 0.75), torch.full((6, 8), 0.5))
+    assert buf.features[0] is None and buf.features[1] is None
+    with pytest.raises(ValueError, match="archived"):
+        buf.feature_block(0, 3)
+    assert torch.equal(buf.feature_block(2, 5)[:, 0, 0, 0], torch.tensor([2.0, 3.0, 4.0]))
+    buf.remove(0)  # renumbers the frozen maps with the rest
+    assert set(buf.frozen_u) == {0} and float(buf.frozen_u[0][0, 0]) == 0.75
+    assert torch.equal(buf.feature_block(1, 4)[:, 0, 0, 0], torch.tensor([2.0, 3.0, 4.0]))

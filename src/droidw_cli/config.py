@@ -251,6 +251,9 @@ class TrackConfig:
     def __post_init__(self) -> None:
         # The uncertainty section is the single source of truth for the BA's copy.
         object.__setattr__(self, "ba", dataclasses.replace(self.ba, uncertainty=self.uncertainty))
+        if self.backend.horizon < self.frontend.window:
+            raise ValueError(f"backend.horizon ({self.backend.horizon}) must be at least frontend.window "
+                             f"({self.frontend.window}): the window BA needs its keyframes' features")
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)

@@ -10,9 +10,9 @@ flow that the current poses and depths induce.  Then a BA over all the edges,
 θ frozen (DROID-W: "θ is frozen during the final global BA").
 
 Bounded: the problem covers only the newest ``horizon`` keyframes, [lo, n).
-Older keyframes keep their poses and leave the problem for good: their
-edges and stored images are dropped (:meth:`GlobalBackend.run` reports
-``lo`` so that the tracker can archive them).  A long video therefore builds
+Older keyframes keep their poses and leave the problem for good: their u
+and confidence maps are frozen, and their features, edges and stored
+images dropped (:meth:`~droidw_cli.slam.frontend.Frontend.archive`).  A long video therefore builds
 a sequence of overlapping bounded problems, never one that grows with it:
 every ``every`` new keyframes during tracking (``periodic_iters``
 iterations), and once at the end (``iters``).
@@ -129,7 +129,8 @@ class GlobalBackend:
             return float("nan")
         lo = max(0, n - self.cfg.horizon)
         if lo > self.lo:
-            fe.cache.drop_before(lo)
+            fe.archive(self.lo, lo)
+            fe.drop_before(lo)
             self.lo = lo
         self.images.keep(set(fe.buffer.frame_index[lo:n]))
         pairs = self._proximity(lo, n)

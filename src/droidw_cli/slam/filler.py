@@ -225,7 +225,7 @@ class TrajectoryFiller:
         if unc.evidence:
             edges = fe.cache.edge_set(mine, offset=lo)
             evidence = evidence_maps(fe.backend, state, edges, fe.params.min_depth)[k - lo: k - lo + 1]
-        u = uncertainty_map(buf.features[k:k + 1].float(), theta, unc.softplus_offset, evidence)
+        u = uncertainty_map(buf.feature_block(k, k + 1).float(), theta, unc.softplus_offset, evidence)
         return conf * weight_factor(weighting_input(u, fe.cfg.uncertainty.mode), fe.cfg.uncertainty.mode)[0]
 
     def _refine(self, anchors: list[int], images: list[np.ndarray], init: Tensor) -> Tensor:

@@ -43,6 +43,7 @@ import numpy as np
 import torch
 
 from droidw_cli.ba.interface import BABackend
+from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.ba.params import BAParams
 from droidw_cli.config import TrackConfig
 from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask
@@ -300,16 +301,68 @@ class Frontend:
         self._epipolar = {(renumber(a), renumber(b)): v for (a, b), v in self._epipolar.items() if k not in (a, b)}
         self._raw = {(renumber(a), renumber(b)): v for (a, b), v in self._raw.items() if k not in (a, b)}
 
-    def evidence(self) -> torch.Tensor | None:
-        """Evidence channels of every keyframe from all cached edges (None when unused)."""
+    def evidence(self, lo: int = 0, hi: int | None = None) -> torch.Tensor | None:
+        """Evidence channels (hi − lo, C, h, w) of keyframes [lo, hi) from their cached outgoing edges
+        (None when unused)."""
         unc = self.params.uncertainty
         n = len(self.buffer)
+        hi = n if hi is None else hi
         if not (unc.enable and unc.evidence) or self.buffer.features is None:
             return None
-        if n < 2 or len(self.cache) == 0:
-            return torch.zeros(n, EVIDENCE_CHANNELS, *self.buffer.grid, device=self.buffer.device)
-        state = window_state(self.buffer, 0, n, self.shared, with_features=False)
-        return evidence_maps(self.backend, state, self.cache.edge_set(self.cache.pairs()), self.params.min_depth)
+        pairs = [p for p in self.cache.pairs() if lo <= p[0] < hi]
+        if n < 2 or not pairs:
+            return torch.zeros(hi - lo, EVIDENCE_CHANNELS, *self.buffer.grid, device=self.buffer.device)
+        start = min(lo, min(j for _, j in pairs))
+        state = window_state(self.buffer, start, n, self.shared, with_features=False)
+        maps = evidence_maps(self.backend, state, self.cache.edge_set(pairs, offset=start), self.params.min_depth)
+        return maps[lo - start:hi - start]
+
+    def confidence(self, lo: int = 0, hi: int | None = None) -> torch.Tensor:
+        """Mean confidence (hi − lo, h, w) of each keyframe's cached outgoing edges (archived: frozen)."""
+        buf = self.buffer
+        hi = len(buf) if hi is None else hi
+        conf = torch.zeros(hi - lo, *buf.grid, device=buf.device)
+        count = torch.zeros(hi - lo)
+        for (i, _), (_, w) in self.cache.targets.items():
+            if lo <= i < hi:
+                conf[i - lo] += w[..., 0].float()
+                count[i - lo] += 1
+        conf /= count.clamp(min=1).to(conf.device)[:, None, None]
+        for k, c in buf.frozen_conf.items():
+            if lo <= k < hi:
+                conf[k - lo] = c.float()
+        return conf
+
+    def uncertainty(self, lo: int = 0, hi: int | None = None) -> torch.Tensor | None:
+        """u (hi − lo, h, w) of keyframes [lo, hi) under the current θ (archived: frozen); None when off."""
+        buf, theta = self.buffer, self.shared.theta
+        hi = len(buf) if hi is None else hi
+        if buf.features is None or theta is None or not self.params.uncertainty.enable:
+            return None
+        live = [k for k in range(lo, hi) if k not in buf.frozen_u]
+        out = torch.zeros(hi - lo, *buf.grid, device=buf.device)
+        if live:
+            a, b = live[0], live[-1] + 1  # archived keyframes are the oldest: the live ones are contiguous
+            u = uncertainty_map(buf.feature_block(a, b).float(), theta, self.params.uncertainty.softplus_offset,
+                                self.evidence(a, b))
+            out[a - lo:b - lo] = u
+        for k, u in buf.frozen_u.items():
+            if lo <= k < hi:
+                out[k - lo] = u.float()
+        return out
+
+    def drop_before(self, lo: int) -> None:
+        """Forget every edge (targets, raw confidences, epipolar maps) with an end before keyframe lo."""
+        self.cache.drop_before(lo)
+        self._raw = {p: v for p, v in self._raw.items() if min(p) >= lo}
+        self._epipolar = {p: v for p, v in self._epipolar.items() if min(p) >= lo}
+
+    def archive(self, lo: int, hi: int) -> None:
+        """Keyframes [lo, hi) leave the optimisation for good: freeze their u and confidence, drop features."""
+        u = self.uncertainty(lo, hi)
+        conf = self.confidence(lo, hi)
+        for k in range(lo, hi):
+            self.buffer.archive(k, None if u is None else u[k - lo], conf[k - lo])
 
     def _evict(self, k: int) -> None:
         """Drop the working-resolution images and epipolar maps of keyframes that left the window."""

@@ -3,8 +3,10 @@
 Per keyframe t it keeps the source frame index and timestamp, the pose G_t
 (world-to-camera, (7,)), the inverse depth d_t (h, w), optional features F_t
 (C, h, w, float16), an optional prior disparity D_t, and an RGB thumbnail.
-Nothing at the working resolution is kept here, so memory grows only with
-the number of keyframes.
+Nothing at the working resolution is kept here.  The features are the bulk
+(64 × h × w float16, ~390 KB at 48 × 64): once a keyframe leaves the bounded
+global problem, :meth:`KeyframeBuffer.archive` replaces them by the frozen
+uncertainty map u_t (h × w float16), so a long video keeps ~70 KB per keyframe.
 
 The tensors live on ``device``, the BA backend's (:attr:`BABackend.device`),
 from the start: a keyframe's pose, disparity, features and prior are copied
@@ -32,8 +34,10 @@ class KeyframeBuffer:
         self.poses[:, 6] = 1.0
         self.disps = torch.ones(capacity, h, w, device=dev)
         self.depth_prior = torch.zeros(capacity, h, w, device=dev)
-        self.features = (torch.zeros(capacity, feature_channels, h, w, dtype=feature_dtype, device=dev)
-                         if feature_channels else None)
+        self.feature_dtype = feature_dtype
+        self.features: list[Tensor | None] | None = [] if feature_channels else None  # None: archived
+        self.frozen_u: dict[int, Tensor] = {}  # archived keyframe → its uncertainty map (h, w) float16
+        self.frozen_conf: dict[int, Tensor] = {}  # archived keyframe → its mean edge confidence (h, w) float16
         self.frame_index: list[int] = []
         self.timestamps: list[float] = []
         self.thumbnails: list[np.ndarray] = []
@@ -52,8 +56,6 @@ class KeyframeBuffer:
         self.poses = new_poses
         self.disps = grown(self.disps, 1.0)
         self.depth_prior = grown(self.depth_prior, 0.0)
-        if self.features is not None:
-            self.features = grown(self.features, 0.0)
 
     def append(self, frame_index: int, timestamp: float, pose: Tensor, disp: Tensor | float,
                thumbnail: np.ndarray, features: Tensor | None = None, depth_prior: Tensor | None = None) -> int:
@@ -63,8 +65,10 @@ class KeyframeBuffer:
         k = self.count
         self.poses[k] = pose
         self.disps[k] = disp
-        if features is not None and self.features is not None:
-            self.features[k] = features.to(device=self.device, dtype=self.features.dtype)
+        if self.features is not None:
+            if features is None:
+                raise ValueError("this buffer keeps features: every keyframe needs them")
+            self.features.append(features.to(device=self.device, dtype=self.feature_dtype))
         if depth_prior is not None:
             self.depth_prior[k] = depth_prior.to(self.device)
             self.has_prior = True
@@ -79,8 +83,11 @@ class KeyframeBuffer:
         if not 0 <= k < self.count:
             raise IndexError(f"keyframe {k} out of range [0, {self.count})")
         n = self.count
-        tensors = [self.poses, self.disps, self.depth_prior] + ([self.features] if self.features is not None else [])
-        for t in tensors:
+        if self.features is not None:
+            del self.features[k]
+        self.frozen_u = {i - (i > k): u for i, u in self.frozen_u.items() if i != k}
+        self.frozen_conf = {i - (i > k): c for i, c in self.frozen_conf.items() if i != k}
+        for t in (self.poses, self.disps, self.depth_prior):
             t[k:n - 1] = t[k + 1:n].clone()
         self.poses[n - 1] = 0.0
         self.poses[n - 1, 6] = 1.0
@@ -88,3 +95,18 @@ class KeyframeBuffer:
         for seq in (self.frame_index, self.timestamps, self.thumbnails):
             del seq[k]
         self.count -= 1
+
+    def feature_block(self, lo: int, hi: int) -> Tensor:
+        """Features (hi − lo, C, h, w) of keyframes [lo, hi), none of them archived."""
+        block = self.features[lo:hi]
+        if any(f is None for f in block):
+            raise ValueError(f"keyframes in [{lo}, {hi}) were archived: their features are gone")
+        return torch.stack(block)
+
+    def archive(self, k: int, uncertainty: Tensor | None, confidence: Tensor) -> None:
+        """Keyframe k left the optimisation for good: keep its u and confidence maps, drop its features."""
+        if uncertainty is not None:
+            self.frozen_u[k] = uncertainty.to(torch.float16)
+        self.frozen_conf[k] = confidence.to(torch.float16)
+        if self.features is not None:
+            self.features[k] = None

@@ -34,10 +34,10 @@ def window_state(buffer: KeyframeBuffer, lo: int, hi: int, shared: SharedState, 
     """A :class:`BAState` for keyframes [lo, hi) of the buffer.
 
     Poses, disparities and the prior are copies; the features are the buffer's
-    own (float16) slice, which the backends only read (they convert it to float32
-    as they need, once per window: no float32 copy here).
+    float16 maps stacked, which the backends only read (they convert them to
+    float32 as they need, once per window).
     """
-    feats = buffer.features[lo:hi] if (with_features and buffer.features is not None) else None
+    feats = buffer.feature_block(lo, hi) if (with_features and buffer.features is not None) else None
     return BAState(
         poses=buffer.poses[lo:hi].clone(),
         disps=buffer.disps[lo:hi].clone(),

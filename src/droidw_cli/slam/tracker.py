@@ -34,7 +34,6 @@ from droidw_cli.slam.backend import GlobalBackend
 from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.frontend import Frontend
 from droidw_cli.slam.motion_filter import MotionFilter
-from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.timing import StageTimer, Timed
 
@@ -96,25 +95,6 @@ def _dynamic_record(fe: Frontend, preparer: FramePreparer) -> DynamicRecord | No
         work = (table[:, col] + 0.5) * BA_SCALE - 0.5
         table[:, col] = (work + off + 0.5) / scale - 0.5
     return DynamicRecord(rec.masks, rec.ids, table)
-
-
-def _confidence(frontend: Frontend) -> torch.Tensor:
-    """Per-keyframe mean confidence of its outgoing edges, (K, h, w)."""
-    buf = frontend.buffer
-    conf = torch.zeros(len(buf), *buf.grid, device=buf.device)
-    count = torch.zeros(len(buf))
-    for (i, _), (_, w) in frontend.cache.targets.items():
-        conf[i] += w[..., 0].float()
-        count[i] += 1
-    return conf / count.clamp(min=1).to(conf.device)[:, None, None]
-
-
-def _keyframe_uncertainty(frontend: Frontend, evidence: torch.Tensor | None) -> torch.Tensor | None:
-    """u (K, h, w) of every keyframe under the final θ, or None when the uncertainty is off."""
-    buf, theta = frontend.buffer, frontend.shared.theta
-    if buf.features is None or theta is None or not frontend.params.uncertainty.enable:
-        return None
-    return uncertainty_map(buf.features[:len(buf)].float(), theta, frontend.params.uncertainty.softplus_offset, evidence)
 
 
 def torch_threads(requested: int) -> int:
@@ -234,8 +214,7 @@ class Tracker:
             with timer("dynamics"):
                 dyn = _dynamic_record(fe, preparer)
 
-            evidence = fe.evidence()
-            unc = _keyframe_uncertainty(fe, evidence)
+            unc = fe.uncertainty()
             with timer("filler"):
                 poses_w2c = filler.finish()
             collected += [str(w.message) for w in caught if not issubclass(w.category, DeprecationWarning)]
@@ -247,7 +226,8 @@ class Tracker:
         k_work = unscale_intrinsics(fe.shared.intrinsics.cpu().numpy().astype(np.float64), BA_SCALE)
         feats_np = theta = None
         if unc is not None:
-            feats_np = buf.features[:n_kf].to(torch.float16).cpu().numpy()
+            if not buf.frozen_u:  # a run longer than the backend's horizon archived the oldest features
+                feats_np = buf.feature_block(0, n_kf).to(torch.float16).cpu().numpy()
             theta = fe.shared.theta.cpu().numpy().copy()
         wall = time.perf_counter() - t_start
         return TrackResult(
@@ -263,7 +243,7 @@ class Tracker:
             kf_images=np.stack(buf.thumbnails) if n_kf else np.zeros((0, 1, 1, 3), np.uint8),
             kf_uncertainty=None if unc is None else unc.cpu().numpy(),
             kf_features=feats_np,
-            kf_confidence=_confidence(fe).cpu().numpy(),
+            kf_confidence=fe.confidence().cpu().numpy(),
             kf_dynamic=None if dyn is None else dyn.masks,
             kf_object_ids=None if dyn is None else dyn.ids,
             objects=None if dyn is None else dyn.table,
