@@ -3,6 +3,7 @@
     python benchmarks/track_bench.py [--presets walk walk-static wobble rotate stopgo fixed] [--seeds 1]
                                      [--frames 0] [--config default] [--baseline] [--backend cpu]
                                      [--memory-minutes 0.5 1] [--set KEY=VALUE ...]
+    python benchmarks/track_bench.py --presets --memory-minutes 1 10     # memory only
 
 Table 1: one row per synthetic sequence (the generator's realistic presets:
 hand-held walk with movers, its static control, a near-still wobbling
@@ -86,7 +87,7 @@ def _cell(v: float, fmt: str = "{:.2f}") -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--presets", nargs="+", default=list(PRESETS))
+    ap.add_argument("--presets", nargs="*", default=list(PRESETS), help="none: only the memory table")
     ap.add_argument("--frames", type=int, default=0, help="0 = each preset's own length")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1])
     ap.add_argument("--config", default="default")
@@ -115,9 +116,10 @@ def main() -> None:
             rows.append([f"{preset} seed {seed}", n, f"{100 * r['keyframes'] / n:.0f} %", ate,
                          _cell(r["ate_kf_cm"]), _cell(off), f"{r['fps']:.2f}",
                          *(f"{1000 * st.get(s, 0.0) / n:.0f}" for s in STAGES), f"{r['peak_mb']:.0f}"])
-    print(f"\nTracking, config {args.config}, backend {args.backend}, known calibration (ms are per input frame)")
-    print_table(["sequence", "frames", "keyframes", "ATE [cm]", "ATE kf [cm]", "ATE off [cm]", "frames/s",
-                 *[f"{s} ms" for s in STAGES], "peak MB"], rows)
+    if rows:
+        print(f"\nTracking, config {args.config}, backend {args.backend}, known calibration (ms are per input frame)")
+        print_table(["sequence", "frames", "keyframes", "ATE [cm]", "ATE kf [cm]", "ATE off [cm]", "frames/s",
+                     *[f"{s} ms" for s in STAGES], "peak MB"], rows)
     if args.memory_minutes:
         mem_rows = []
         for minutes in args.memory_minutes:

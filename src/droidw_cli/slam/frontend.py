@@ -60,6 +60,30 @@ from droidw_cli.slam.poses import extrapolate
 PROXIMITY_RECENT = 5
 
 
+
+def seed_disparity(fallback: torch.Tensor | float, prior: torch.Tensor | None, hw: tuple[int, int],
+                   device: torch.device | str = "cpu") -> torch.Tensor:
+    """Initial disparity of a keyframe: the sensor's where it has one, ``fallback`` elsewhere.
+
+    With a depth prior D (disparity, 0 = invalid) the seed is
+
+        d₀(p) = D(p)          where D(p) > 0,
+        d₀(p) = fallback(p)   otherwise,
+
+    ``fallback`` being the transferred disparity (or a constant).  Without a
+    prior d₀ = fallback.  This matters for the scale: the BA's gauge is fixed
+    by the first keyframe (t0 = 1) during initialisation and by two fixed
+    keyframes in every later window, so the metric scale has to be present in
+    the disparities *before* the first iterations; the weak prior term
+    γ_d (d − D)² alone cannot pull a whole mis-scaled reconstruction along the
+    (LM-damped) scale direction, and two fixed poses then freeze the wrong scale.
+    """
+    base = torch.as_tensor(fallback, dtype=torch.float32, device=device).expand(*hw)
+    if prior is None:
+        return base.clone()
+    prior = prior.to(device=device, dtype=torch.float32).reshape(*hw)
+    return torch.where(prior > 0, prior, base)
+
 class Frontend:
     """Owns the keyframe buffer, the edge cache and the window BA."""
 
@@ -218,6 +242,7 @@ class Frontend:
                                       self.params.min_depth)
         else:
             pose, disp = torch.tensor([0, 0, 0, 0, 0, 0, 1.0]), 1.0
+        disp = seed_disparity(disp, depth_prior, buf.disps.shape[1:], buf.device)
         buf.append(frame_index, timestamp, pose, disp, thumbnail, features, depth_prior)
         self.images[k] = image
         self.masks.append(image, timestamp)
@@ -245,7 +270,8 @@ class Frontend:
         for m in range(2, n + 1):
             if m >= 3:
                 buf.poses[m - 1] = extrapolate(buf.poses[m - 3], buf.poses[m - 2], 1.0)
-                buf.disps[m - 1] = buf.disps[m - 2].median()
+                prior = buf.depth_prior[m - 1] if buf.has_prior else None
+                buf.disps[m - 1] = seed_disparity(buf.disps[m - 2].median(), prior, buf.disps.shape[1:], buf.device)
             pairs = graph.init_pairs(m, init_radius)
             self._match(pairs, use_prior=m >= 3)
             self._optimise(0, m, pairs, 4 if m < n else f.init_iters)
