@@ -108,7 +108,7 @@ class FrontendConfig:
     max_edges: int = 75
     flow_thresh: float = 16.0  # grid px
     keyframe_thresh: float = 3.0  # grid px
-    removal_max_span: int = 18  # frames: no removal that would leave a longer gap between keyframes
+    removal_max_span: int = 12  # frames: no removal that would leave a longer gap between keyframes (600-frame walks, 3 seeds: mean ATE 0.85 cm at 12, 1.04 at 18)
     nms: int = 1
     proximity_max: int = 3
     max_age: int = 50
