@@ -41,9 +41,30 @@ class IOConfig:
 
 @dataclass(frozen=True)
 class CalibConfig:
-    """Self-calibration for ``--calib auto``: the focal length BA starts from, as a multiple of max(H, W)."""
+    """Self-calibration for ``--calib auto`` (:mod:`droidw_cli.slam.focal`).
+
+    BA starts from f₀ = ``focal_init`` · max(H, W).  The focal length stays fixed
+    during initialisation and is optimised in a window BA only once the window
+    spans ``min_keyframes`` keyframes whose orientations differ by at least
+    ``min_rotation`` degrees (a translation alone leaves f unobservable: it
+    trades against depth and the translation direction).  It is always kept in
+    [``focal_min``, ``focal_max``] · f₀.
+    """
 
     focal_init: float = 0.9
+    min_keyframes: int = 8
+    min_rotation: float = 5.0  # degrees
+    focal_min: float = 0.3
+    focal_max: float = 3.0
+
+    def __post_init__(self) -> None:
+        if not self.focal_init > 0:
+            raise ValueError(f"calib.focal_init must be positive, got {self.focal_init}")
+        if not 0 < self.focal_min <= 1 <= self.focal_max:
+            raise ValueError(f"calib.focal_min/focal_max must satisfy 0 < min <= 1 <= max, "
+                             f"got {self.focal_min}, {self.focal_max}")
+        if self.min_keyframes < 2 or self.min_rotation < 0:
+            raise ValueError("calib.min_keyframes must be >= 2 and calib.min_rotation >= 0")
 
 
 #: Every flow threshold below is in pixels of the 1/8-resolution BA grid (DROID's unit): 3.0 grid px

@@ -9,6 +9,9 @@ Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distanc
   each, then ``init_iters`` iterations over all of them.  A fixed camera never
   gets a second keyframe (the motion filter tests the median flow before
   initialisation), so it stays at the identity.
+* Under ``--calib auto`` the focal length stays fixed during initialisation and
+  is optimised in a window only once its keyframes show enough rotation to
+  constrain it, within bounds (:mod:`droidw_cli.slam.focal`).
 * Update for each later keyframe k, which starts at the damped
   constant-velocity pose and its predecessor's disparity warped into it:
   edges to its ``radius`` predecessors plus proximity edges of the newest
@@ -38,6 +41,8 @@ they are cached.
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import torch
@@ -51,6 +56,7 @@ from droidw_cli.dynamics.inloop import KeyframeMasks, observed_disparity
 from droidw_cli.slam import graph
 from droidw_cli.slam.distance import frame_distance, transfer_disparity
 from droidw_cli.slam.evidence import EVIDENCE_CHANNELS, evidence_maps
+from droidw_cli.slam.focal import clamp_focal, focal_observable
 from droidw_cli.slam.keyframes import KeyframeBuffer
 from droidw_cli.slam.optimizer import SharedState, run_window, window_state
 from droidw_cli.slam.parallax import homography_parallax
@@ -101,6 +107,9 @@ class Frontend:
         extra = EVIDENCE_CHANNELS if params.uncertainty.evidence else 0
         theta = torch.zeros(feature_channels + extra + 1, device=dev) if feature_channels else None
         self.shared = SharedState(intrinsics8.clone().float().to(dev), theta)
+        # --calib auto: the focal guess, and the BA settings for windows that cannot constrain f
+        self._focal0 = float(intrinsics8[0])
+        self._fixed_focal = dataclasses.replace(params, optimize_focal="none")
         self.images: dict[int, np.ndarray] = {}
         self.initialised = False
         self.on_remove = None  # called with a keyframe's index just before keyframe removal drops it
@@ -217,10 +226,19 @@ class Frontend:
             self.masks.set_current(k, None if objects is None else objects.mask)
         self._mask_movers(set(frames))
 
-    def _optimise(self, lo: int, hi: int, pairs: list[tuple[int, int]], iters: int) -> float:
+    def _optimise(self, lo: int, hi: int, pairs: list[tuple[int, int]], iters: int, focal: bool = True) -> float:
+        """Window BA over keyframes [lo, hi); the focal length moves only when ``focal`` and the
+        window constrains it (:func:`droidw_cli.slam.focal.focal_observable`), and stays in its bounds."""
         edges = self.cache.edge_set(pairs, offset=lo)
         fixed = 1 if lo == 0 else min(2, hi - lo - 1)
-        return run_window(self.backend, self.buffer, lo, hi, edges, self.params, self.shared, iters, fixed)
+        params = self.params
+        if params.optimize_focal != "none":
+            if not (focal and focal_observable(self.buffer.poses[lo:hi], self.cfg.calib)):
+                params = self._fixed_focal
+        cost = run_window(self.backend, self.buffer, lo, hi, edges, params, self.shared, iters, fixed)
+        if params.optimize_focal != "none":
+            self.shared.intrinsics = clamp_focal(self.shared.intrinsics, self._focal0, self.cfg.calib)
+        return cost
 
     def distance(self, ii: list[int], jj: list[int]) -> torch.Tensor:
         """Frame distances d(i, j) in grid px under the current poses and disparities."""
@@ -274,8 +292,8 @@ class Frontend:
                 buf.disps[m - 1] = seed_disparity(buf.disps[m - 2].median(), prior, buf.disps.shape[1:], buf.device)
             pairs = graph.init_pairs(m, init_radius)
             self._match(pairs, use_prior=m >= 3)
-            self._optimise(0, m, pairs, 4 if m < n else f.init_iters)
-        self._optimise(0, n, graph.init_pairs(n, init_radius), f.iters1 + f.iters2)
+            self._optimise(0, m, pairs, 4 if m < n else f.init_iters, focal=False)
+        self._optimise(0, n, graph.init_pairs(n, init_radius), f.iters1 + f.iters2, focal=False)
         self._detect(list(range(n)))
         self.initialised = True
 
