@@ -74,7 +74,7 @@ def test_loop_edges_join_a_revisit_and_nothing_near_the_frontend_edges():
 
 
 def test_the_horizon_drops_old_edges_and_images():
-    fe, cfg, _ = _loop_frontend(24, ["backend.every=0", "backend.iters=1", "backend.horizon=10"])
+    fe, cfg, _ = _loop_frontend(24, ["backend.every=0", "backend.iters=1", "backend.horizon=10", "frontend.window=8"])
     gba = GlobalBackend(fe, cfg.backend)
     for k in range(24):
         gba.images.put(k, fe.images[k])
