@@ -27,6 +27,7 @@ from droidw_cli.ba.synthetic import make_problem, perturb
 from droidw_backend_cpu import CpuBackend
 from droidw_backend_cpu.linearize import linearize
 from droidw_backend_cuda import backend as cuda_backend
+from ba_cases import BA_STEP_CASES
 
 REL = 1e-4
 MODES = {0: "clamp", 1: "clamp", 2: "inverse"}  # the kernel's codes (u already rescaled for "relative")
@@ -103,14 +104,7 @@ def _close(a, b, rel=REL):
     return float((a - b).abs().max()) <= rel * scale
 
 
-@pytest.mark.parametrize("params", [
-    BAParams(uncertainty=UncertaintyParams(enable=False)),
-    BAParams(),
-    BAParams(uncertainty=UncertaintyParams(mode="inverse", bidirectional=True)),
-    BAParams(motion_only=True),
-    BAParams(optimize_focal="shared"),
-    BAParams(optimize_focal="xy", t0=2),
-])
+@pytest.mark.parametrize("params", BA_STEP_CASES)
 def test_cuda_assembly_matches_cpu(problem, kernels, params):
     state, edges = problem
     cpu, cuda = CpuBackend(), cuda_backend.CudaBackend(device="cpu")

@@ -7,6 +7,7 @@ import torch
 
 from droidw_cli.ba.params import BAParams, UncertaintyParams
 from droidw_cli.ba.synthetic import make_problem, perturb
+from ba_cases import BA_STEP_CASES
 
 pytestmark = [pytest.mark.cuda,
               pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")]
@@ -46,14 +47,7 @@ def test_reproject_equal(backends, problem):
     assert torch.equal(v1, v2.cpu())
 
 
-@pytest.mark.parametrize("params", [
-    BAParams(uncertainty=UncertaintyParams(enable=False)),
-    BAParams(),
-    BAParams(uncertainty=UncertaintyParams(mode="inverse", bidirectional=True)),
-    BAParams(motion_only=True),
-    BAParams(optimize_focal="shared"),
-    BAParams(optimize_focal="xy", t0=2),
-])
+@pytest.mark.parametrize("params", BA_STEP_CASES)
 def test_ba_step_equal(backends, problem, params):
     cpu, cuda = backends
     state, edges = problem
