@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -128,3 +129,12 @@ def test_a_predicted_centre_keeps_the_id_across_a_large_image_motion():
     assert told.update(first)[0].id == a
     assert plain.update(second)[0].id != a  # lost: a new id
     assert told.update(second, predicted={a: (20.5, 11.5)})[0].id == a
+
+
+def test_keyframe_colours_are_stored_as_bytes_and_read_as_unit_floats():
+    masks = KeyframeMasks(DynamicsConfig(), (6, 8), consistency=False)
+    image = np.random.default_rng(0).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+    masks.append(image, 0.0)
+    assert masks.images[0].dtype == torch.uint8  # 1 byte a channel: a 10-minute video keeps thousands
+    expected = torch.from_numpy(cv2.resize(image, (8, 6), interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0)
+    assert torch.equal(masks.image(0), expected)

@@ -136,3 +136,16 @@ def test_archived_keyframes_keep_u_and_confidence_but_not_features():
     buf.remove(0)  # renumbers the frozen maps with the rest
     assert set(buf.frozen_u) == {0} and float(buf.frozen_u[0][0, 0]) == 0.75
     assert torch.equal(buf.feature_block(1, 4)[:, 0, 0, 0], torch.tensor([2.0, 3.0, 4.0]))
+
+
+def test_monocular_buffer_keeps_no_prior_and_allocates_it_with_the_first_one():
+    buf = KeyframeBuffer((6, 8), capacity=2)
+    for k in range(3):
+        buf.append(k, k / 30.0, _pose(), 1.0, np.zeros((2, 2, 3), np.uint8))
+    assert buf.depth_prior is None and not buf.has_prior
+    buf.append(3, 0.1, _pose(), 1.0, np.zeros((2, 2, 3), np.uint8), depth_prior=torch.full((6, 8), 0.5))
+    buf.append(4, 0.2, _pose(), 1.0, np.zeros((2, 2, 3), np.uint8))  # grows past the capacity of 4
+    assert buf.has_prior and buf.depth_prior.shape == buf.disps.shape
+    assert buf.depth_prior[:3].abs().sum() == 0 and float(buf.depth_prior[3, 0, 0]) == 0.5
+    buf.remove(0)
+    assert float(buf.depth_prior[2, 0, 0]) == 0.5 and float(buf.depth_prior[3, 0, 0]) == 0.0

@@ -40,9 +40,8 @@ MAX_MASKED = 0.5
 
 
 def grid_image(image: np.ndarray, grid: tuple[int, int]) -> Tensor:
-    """Working-size RGB uint8 (H, W, 3) → (h, w, 3) float32 in [0, 1] on the BA grid (area average)."""
-    small = cv2.resize(image, (grid[1], grid[0]), interpolation=cv2.INTER_AREA)
-    return torch.from_numpy(small.astype(np.float32) / 255.0)
+    """Working-size RGB uint8 (H, W, 3) → (h, w, 3) uint8 on the BA grid (area average)."""
+    return torch.from_numpy(cv2.resize(image, (grid[1], grid[0]), interpolation=cv2.INTER_AREA))
 
 
 def observed_disparity(disps: Tensor, prior: Tensor | None) -> Tensor:
@@ -63,7 +62,7 @@ class KeyframeMasks:
         self.consistency = consistency
         self.params = params or DetectionParams()
         self.segmenter = get_segmenter(cfg.segmenter, self.params) if consistency else None
-        self.images: list[Tensor] = []
+        self.images: list[Tensor] = []  # (h, w, 3) uint8 on the grid: 9 KB a keyframe at 48 × 64, see image()
         self.masks: list[Tensor] = []  # union of every mask ever given (the map leaves these out)
         self.current: list[Tensor] = []  # the latest consistency mask (BA zeroes these)
         self.times: list[float] = []  # keyframe timestamps (object motion over time)
@@ -77,6 +76,10 @@ class KeyframeMasks:
         self.times.append(float(len(self.times) if timestamp is None else timestamp))
         self.masks.append(torch.zeros(self.grid, dtype=torch.bool))
         self.current.append(torch.zeros(self.grid, dtype=torch.bool))
+
+    def image(self, k: int) -> Tensor:
+        """Keyframe k's colour on the grid, (h, w, 3) float32 in [0, 1]."""
+        return self.images[k].float() / 255.0
 
     def remove(self, k: int) -> None:
         """Keyframe removal: drop k, the later keyframes move down by one (a k never registered is ignored)."""
@@ -112,7 +115,7 @@ class KeyframeMasks:
         if not sources or self.segmenter is None:
             return None
         idx = [*sources, k]
-        images = torch.stack([self.images[i] for i in idx])
+        images = torch.stack([self.image(i) for i in idx])
         d = disps[idx].detach().float().cpu()
         g = poses_w2c[idx].detach().float().cpu()
         kk = intrinsics.detach().float().cpu()

@@ -169,14 +169,14 @@ def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, in
     for k in range(n):
         depth = _depth(d[k])
         predicted = _predict(history, tracker, times, k, c2w, kk, (h, w))
-        mask = _propagate(masks, masks.masks[k], masks.images[k], depth, tracker, stats, cfg, predicted)
+        mask = _propagate(masks, masks.masks[k], masks.image(k), depth, tracker, stats, cfg, predicted)
         masks.masks[k] = mask
         objs = tracker.update(mask, predicted)
         stats = {}
         depth_np = depth.numpy().astype(np.float64)
         for obj in objs:
             ids[k][obj.mask] = obj.id
-            s = _stats(masks.images[k], depth, torch.from_numpy(obj.mask))
+            s = _stats(masks.image(k), depth, torch.from_numpy(obj.mask))
             if s is not None:
                 stats[obj.id] = s
             ok = obj.mask & (depth_np > 0)

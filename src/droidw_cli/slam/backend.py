@@ -25,11 +25,11 @@ from __future__ import annotations
 
 import dataclasses
 
-import cv2
 import numpy as np
 import torch
 
 from droidw_cli.config import BackendConfig
+from droidw_cli.io.jpeg import decode_rgb, encode_rgb
 from droidw_cli.slam import graph
 from droidw_cli.slam.distance import frame_distance
 from droidw_cli.slam.frontend import Frontend
@@ -54,16 +54,10 @@ class KeyframeImages:
         return sum(v.nbytes for v in self._data.values())
 
     def put(self, frame_index: int, image: np.ndarray) -> None:
-        bgr = image[..., ::-1] if image.ndim == 3 else image
-        ok, buf = cv2.imencode(".jpg", np.ascontiguousarray(bgr), [cv2.IMWRITE_JPEG_QUALITY, self.quality])
-        if not ok:
-            raise RuntimeError("JPEG encoding of a keyframe image failed")
-        self._data[int(frame_index)] = buf
+        self._data[int(frame_index)] = encode_rgb(image, self.quality)
 
     def get(self, frame_index: int) -> np.ndarray:
-        data = self._data[int(frame_index)]
-        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
-        return np.ascontiguousarray(image[..., ::-1]) if image.ndim == 3 else image
+        return decode_rgb(self._data[int(frame_index)])
 
     def keep(self, frame_indices: set[int]) -> None:
         """Forget every image whose frame index is not in ``frame_indices``."""

@@ -2,11 +2,12 @@
 
 Per keyframe t it keeps the source frame index and timestamp, the pose G_t
 (world-to-camera, (7,)), the inverse depth d_t (h, w), optional features F_t
-(C, h, w, float16), an optional prior disparity D_t, and an RGB thumbnail.
+(C, h, w, float16), an optional prior disparity D_t (allocated with the first
+prior, so monocular runs keep none), and an RGB thumbnail.
 Nothing at the working resolution is kept here.  The features are the bulk
 (64 × h × w float16, ~390 KB at 48 × 64): once a keyframe leaves the bounded
 global problem, :meth:`KeyframeBuffer.archive` replaces them by the frozen
-uncertainty map u_t (h × w float16), so a long video keeps ~70 KB per keyframe.
+uncertainty map u_t (h × w float16); thumbnails are kept JPEG-encoded.
 
 The tensors live on ``device``, the BA backend's (:attr:`BABackend.device`),
 from the start: a keyframe's pose, disparity, features and prior are copied
@@ -18,6 +19,11 @@ from __future__ import annotations
 import numpy as np
 import torch
 from torch import Tensor
+
+from droidw_cli.io.jpeg import decode_rgb, encode_rgb
+
+#: JPEG quality of the stored thumbnails (37 KB raw at 96 × 128 → a few KB; a long video keeps thousands)
+THUMBNAIL_QUALITY = 95
 
 
 class KeyframeBuffer:
@@ -33,14 +39,14 @@ class KeyframeBuffer:
         self.poses = torch.zeros(capacity, 7, device=dev)
         self.poses[:, 6] = 1.0
         self.disps = torch.ones(capacity, h, w, device=dev)
-        self.depth_prior = torch.zeros(capacity, h, w, device=dev)
+        self.depth_prior: Tensor | None = None  # allocated with the first prior (RGB-D); monocular runs keep none
         self.feature_dtype = feature_dtype
         self.features: list[Tensor | None] | None = [] if feature_channels else None  # None: archived
         self.frozen_u: dict[int, Tensor] = {}  # archived keyframe → its uncertainty map (h, w) float16
         self.frozen_conf: dict[int, Tensor] = {}  # archived keyframe → its mean edge confidence (h, w) float16
         self.frame_index: list[int] = []
         self.timestamps: list[float] = []
-        self.thumbnails: list[np.ndarray] = []
+        self.thumbnails: list[np.ndarray] = []  # JPEG bytes (quality THUMBNAIL_QUALITY), see thumbnail()
         self.has_prior = False
 
     def __len__(self) -> int:
@@ -55,7 +61,8 @@ class KeyframeBuffer:
         new_poses[self.poses.shape[0]:, 6] = 1.0
         self.poses = new_poses
         self.disps = grown(self.disps, 1.0)
-        self.depth_prior = grown(self.depth_prior, 0.0)
+        if self.depth_prior is not None:
+            self.depth_prior = grown(self.depth_prior, 0.0)
 
     def append(self, frame_index: int, timestamp: float, pose: Tensor, disp: Tensor | float,
                thumbnail: np.ndarray, features: Tensor | None = None, depth_prior: Tensor | None = None) -> int:
@@ -70,11 +77,14 @@ class KeyframeBuffer:
                 raise ValueError("this buffer keeps features: every keyframe needs them")
             self.features.append(features.to(device=self.device, dtype=self.feature_dtype))
         if depth_prior is not None:
+            if self.depth_prior is None:
+                self.depth_prior = torch.zeros_like(self.disps)
             self.depth_prior[k] = depth_prior.to(self.device)
             self.has_prior = True
         self.frame_index.append(int(frame_index))
         self.timestamps.append(float(timestamp))
-        self.thumbnails.append(thumbnail)
+        self.thumbnails.append(encode_rgb(thumbnail, THUMBNAIL_QUALITY))
+        self._thumb_shape = thumbnail.shape
         self.count += 1
         return k
 
@@ -88,13 +98,27 @@ class KeyframeBuffer:
         self.frozen_u = {i - (i > k): u for i, u in self.frozen_u.items() if i != k}
         self.frozen_conf = {i - (i > k): c for i, c in self.frozen_conf.items() if i != k}
         for t in (self.poses, self.disps, self.depth_prior):
-            t[k:n - 1] = t[k + 1:n].clone()
+            if t is not None:
+                t[k:n - 1] = t[k + 1:n].clone()
         self.poses[n - 1] = 0.0
         self.poses[n - 1, 6] = 1.0
         self.disps[n - 1] = 1.0
         for seq in (self.frame_index, self.timestamps, self.thumbnails):
             del seq[k]
         self.count -= 1
+
+    def thumbnail(self, k: int) -> np.ndarray:
+        """Keyframe k's RGB thumbnail (decoded; JPEG at quality THUMBNAIL_QUALITY)."""
+        return decode_rgb(self.thumbnails[k])
+
+    def thumbnail_stack(self) -> np.ndarray:
+        """(K, H/s, W/s, 3) uint8: every thumbnail, decoded into one array."""
+        if not self.count:
+            return np.zeros((0, 1, 1, 3), np.uint8)
+        out = np.empty((self.count, *self._thumb_shape), np.uint8)
+        for k in range(self.count):
+            out[k] = self.thumbnail(k)
+        return out
 
     def feature_block(self, lo: int, hi: int) -> Tensor:
         """Features (hi − lo, C, h, w) of keyframes [lo, hi), none of them archived."""

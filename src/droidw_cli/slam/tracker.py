@@ -240,7 +240,7 @@ class Tracker:
             kf_timestamps=np.array(buf.timestamps, dtype=np.float64),
             kf_poses_c2w=to_matrix(invert(buf.poses[:n_kf].cpu())) if n_kf else np.zeros((0, 4, 4)),
             kf_disps=buf.disps[:n_kf].cpu().numpy().copy(),
-            kf_images=np.stack(buf.thumbnails) if n_kf else np.zeros((0, 1, 1, 3), np.uint8),
+            kf_images=buf.thumbnail_stack(),
             kf_uncertainty=None if unc is None else unc.cpu().numpy(),
             kf_features=feats_np,
             kf_confidence=fe.confidence().cpu().numpy(),
