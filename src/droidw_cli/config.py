@@ -91,6 +91,7 @@ class CorrespondenceConfig:
 
     name: str = "dis"
     preset: str = "medium"
+    quick_preset: str = "fine"  # the filler's one-way flow keyframe → frame (quick_target)
     fb_thresh: float = 1.0  # forward-backward consistency threshold, full-res px
     photo_sigma: float = 0.1  # photometric agreement scale (intensity in [0, 1])
 

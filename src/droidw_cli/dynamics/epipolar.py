@@ -45,6 +45,11 @@ FIT_POINTS = 768
 NOISE_FACTOR = 5.0
 #: a keyframe whose mask would cover more than this share of the view is not masked
 MAX_MOVING = 0.75
+#: an edge is degenerate (near-pure rotation) when a homography explains its confident flow to a median
+#: transfer error of at most DEGENERATE_PX working px (at the 384 × 512 default working size, 640 px diagonal;
+#: scaled with the diagonal) and at most DEGENERATE_RATIO × F's median Sampson distance
+DEGENERATE_PX = 1.0
+DEGENERATE_RATIO = 4.0
 
 
 def sampson_distance(fundamental: np.ndarray, x_i: np.ndarray, x_j: np.ndarray) -> np.ndarray:
@@ -87,7 +92,16 @@ def epipolar_distance(flow: np.ndarray, weight: np.ndarray, min_weight: float = 
     fundamental, _ = cv2.findFundamentalMat(x_i[idx], x_j[idx], cv2.FM_LMEDS)
     if fundamental is None or fundamental.shape != (3, 3):
         return None
-    return sampson_distance(fundamental, x_i, x_j).reshape(h, w).astype(np.float32)
+    sampson = sampson_distance(fundamental, x_i, x_j)
+    homography, _ = cv2.findHomography(x_i[idx], x_j[idx], cv2.LMEDS)
+    if homography is not None and homography.shape == (3, 3):
+        # near-pure rotation: x_j = H x_i fits the background, and F = [e']× H for any epipole e', so the
+        # fitted epipolar lines are arbitrary and a mover walking along them is missed: test against H
+        transfer = np.linalg.norm(cv2.perspectiveTransform(x_i[None], homography)[0] - x_j, axis=1)
+        med = float(np.median(transfer[idx]))
+        if med <= DEGENERATE_PX * float(np.hypot(height, width)) / 640.0 and med <= DEGENERATE_RATIO * float(np.median(sampson[idx])):
+            return transfer.reshape(h, w).astype(np.float32)
+    return sampson.reshape(h, w).astype(np.float32)
 
 
 def moving_mask(distances: list[np.ndarray], thresh: float, dilate: int) -> np.ndarray:
