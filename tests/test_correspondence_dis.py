@@ -48,7 +48,7 @@ MOTIONS = {
 }
 
 
-@pytest.mark.parametrize("preset", ["fast", "medium"])
+@pytest.mark.parametrize("preset", ["fast", "fine", "medium"])
 @pytest.mark.parametrize("motion", list(MOTIONS))
 def test_targets_match_known_affine_motion(image, preset, motion):
     m = MOTIONS[motion]
@@ -155,7 +155,16 @@ def test_bad_inputs_are_rejected(image):
         dis.match_many([])
 
 
-@pytest.mark.parametrize("field, value", [("preset", "slow"), ("fb_thresh", 0.0), ("photo_sigma", -1.0)])
+@pytest.mark.parametrize("field, value", [("preset", "slow"), ("quick_preset", "slow"), ("fb_thresh", 0.0), ("photo_sigma", -1.0)])
 def test_bad_config_is_a_config_error(field, value):
     with pytest.raises(ConfigError, match=field):
         DISCorrespondence(CorrespondenceConfig(**{field: value}))
+
+
+def test_fine_preset_is_fast_with_a_finer_pyramid_and_the_filler_uses_it_by_default():
+    from droidw_cli.correspondence.dis import create_dis
+
+    fine, fast = create_dis("fine"), create_dis("fast")
+    assert fine.getFinestScale() == 1 and fast.getFinestScale() == 2
+    assert fine.getPatchSize() == fast.getPatchSize() and fine.getPatchStride() == 6
+    assert CorrespondenceConfig().quick_preset == "fine"

@@ -97,3 +97,21 @@ def test_epipolar_mask_finds_the_mover_end_to_end(dilate):
     cells = mover.reshape(H // 8, 8, W // 8, 8).all(axis=(1, 3))
     assert m[cells].all()
     assert m.mean() < 0.5
+
+
+def test_a_mover_under_pure_rotation_is_found_by_the_homography_test():
+    """Pure rotation: x_j = K R K⁻¹ x_i for every depth, F is degenerate (any epipole fits), so a mover
+    walking along the fitted epipolar lines would pass; the homography transfer error flags it."""
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
+    a = np.deg2rad(2.0)
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])  # a pan
+    hom = K @ rot @ np.linalg.inv(K)
+    p = hom @ np.stack([xs.ravel(), ys.ravel(), np.ones(xs.size)])
+    flow = np.stack([p[0] / p[2] - xs.ravel(), p[1] / p[2] - ys.ravel()], 1).reshape(H, W, 2).astype(np.float32)
+    mover = np.zeros((H, W), bool)
+    mover[24:56, 32:64] = True
+    flow[mover] += np.array([3.0, 0.0], np.float32)  # moves along the pan, the direction F cannot tell apart
+    d = epipolar_distance(flow, np.ones((H // 8, W // 8)))
+    cells = mover.reshape(H // 8, 8, W // 8, 8).all(axis=(1, 3))
+    assert np.median(d[~cells]) < 0.05
+    assert np.min(d[cells]) > 1.0
