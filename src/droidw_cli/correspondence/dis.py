@@ -122,7 +122,7 @@ class DISCorrespondence(CorrespondenceSource):
         return self._scored(gray_i, gray_j, fwd, bwd), self._scored(gray_j, gray_i, bwd, fwd)
 
     def quick_target(self, image_i: np.ndarray, image_j: np.ndarray) -> torch.Tensor:
-        """Target i → j from one FAST DIS flow at the working resolution (no confidence)."""
+        """Target i → j from one DIS flow (``quick_preset``) at the working resolution (no confidence)."""
         self._check(image_i, image_j, None)
         flow = self._dis_target.calc(to_gray(image_i), to_gray(image_j), None)
         return torch.from_numpy(flow_to_target(flow))
