@@ -52,7 +52,6 @@ MEAN_FLOW_PRESET = "fast"
 # walks; "fine" instead of "fast" took the 600-frame static control from 0.51 to 0.34 cm.
 
 
-
 def to_gray(image: np.ndarray) -> np.ndarray:
     """(H, W) contiguous uint8 grayscale of an RGB (H, W, 3) or gray (H, W) uint8 image."""
     gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image

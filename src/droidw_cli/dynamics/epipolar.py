@@ -99,7 +99,9 @@ def epipolar_distance(flow: np.ndarray, weight: np.ndarray, min_weight: float = 
         # fitted epipolar lines are arbitrary and a mover walking along them is missed: test against H
         transfer = np.linalg.norm(cv2.perspectiveTransform(x_i[None], homography)[0] - x_j, axis=1)
         med = float(np.median(transfer[idx]))
-        if med <= DEGENERATE_PX * float(np.hypot(height, width)) / 640.0 and med <= DEGENERATE_RATIO * float(np.median(sampson[idx])):
+        limit = min(DEGENERATE_PX * float(np.hypot(height, width)) / 640.0,
+                    DEGENERATE_RATIO * float(np.median(sampson[idx])))
+        if med <= limit:
             return transfer.reshape(h, w).astype(np.float32)
     return sampson.reshape(h, w).astype(np.float32)
 
