@@ -46,6 +46,10 @@ class CorrespondenceSource(ABC):
     """Dense targets and confidences between two frames."""
 
     name: str = ""
+    #: ``quick_target`` may run on a worker thread while the other methods run on the main one
+    #: (the trajectory filler then computes its flows ahead of time); calls of ``quick_target``
+    #: itself never overlap.  False: the filler calls it synchronously.
+    concurrent_quick_target: bool = False
 
     @abstractmethod
     def match(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None = None) -> Correspondence:

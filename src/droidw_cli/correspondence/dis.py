@@ -67,6 +67,7 @@ class DISCorrespondence(CorrespondenceSource):
     """
 
     name = "dis"
+    concurrent_quick_target = True  # quick_target has its own DIS object
 
     def __init__(self, cfg: CorrespondenceConfig | None = None) -> None:
         cfg = cfg or CorrespondenceConfig()

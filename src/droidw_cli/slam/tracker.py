@@ -195,6 +195,9 @@ class Tracker:
             items = prefetched(((f, *preparer(f.image, f.depth)) for f in source), cfg.io.prefetch)
             try:
                 self._first_pass(items, fe, mfilter, filler, gba, frames, bar, grid, hw)
+            except BaseException:
+                filler.close()  # stops the filler's flow worker
+                raise
             finally:
                 items.close()  # stops the prefetch thread, also after an error
                 if restore is not None:
