@@ -95,6 +95,16 @@ def test_out_of_image_targets_have_zero_weight(image):
     assert w[2:-2, 2:-5].mean() > 0.8
 
 
+def test_a_flow_does_not_depend_on_the_calls_before_it():
+    """OpenCV's DIS keeps a leftover of an initial flow for the next call without one: not visible here."""
+    gray_i = cv2.cvtColor(texture(H, W, 5), cv2.COLOR_RGB2GRAY)
+    gray_j = warp(gray_i, np.float32([[1, 0, 6.5], [0, 1, -3.0]]))
+    fresh = DISCorrespondence().flow(gray_i, gray_j)
+    dis = DISCorrespondence()
+    dis.flow(gray_i, gray_j, np.full((H, W, 2), 5.0, np.float32))
+    assert np.array_equal(fresh, dis.flow(gray_i, gray_j))
+
+
 def test_init_flow_recovers_a_large_shift():
     h, w, dx, dy = 384, 512, 100, 5
     big = texture(h + 200, w + 200, 2)

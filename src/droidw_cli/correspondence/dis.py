@@ -79,14 +79,21 @@ class DISCorrespondence(CorrespondenceSource):
         if not cfg.photo_sigma > 0:
             raise ConfigError(f"correspondence.photo_sigma must be > 0, got {cfg.photo_sigma}")
         self.cfg = cfg
+        # OpenCV's DIS keeps state between calls: a call without an initial flow that follows one with
+        # an initial flow starts from a leftover of it (up to 4 px difference on a walk pair with
+        # MEDIUM), so such a flow depended on the call before it.  Calls with and without an initial
+        # flow use separate objects; each result then depends on its inputs only.
         self._dis = create_dis(cfg.preset)
+        self._dis_seeded = create_dis(cfg.preset)
         self._dis_quick = create_dis(MEAN_FLOW_PRESET)
         self._dis_target = create_dis(cfg.quick_preset)
 
     def flow(self, gray_i: np.ndarray, gray_j: np.ndarray, init_flow: np.ndarray | None = None) -> np.ndarray:
         """(H, W, 2) float32 DIS flow gray_i → gray_j, optionally started from ``init_flow``."""
-        start = None if init_flow is None else np.ascontiguousarray(init_flow, dtype=np.float32).copy()
-        return np.ascontiguousarray(self._dis.calc(gray_i, gray_j, start), dtype=np.float32)
+        if init_flow is None:
+            return np.ascontiguousarray(self._dis.calc(gray_i, gray_j, None), dtype=np.float32)
+        start = np.ascontiguousarray(init_flow, dtype=np.float32).copy()
+        return np.ascontiguousarray(self._dis_seeded.calc(gray_i, gray_j, start), dtype=np.float32)
 
     def _check(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None) -> np.ndarray | None:
         validate_image(image_i, "image_i")
