@@ -177,7 +177,7 @@ class Tracker:
         k8 = torch.tensor(scale_intrinsics(np.asarray(preparer.intrinsics, dtype=np.float64), BA_SCALE), dtype=torch.float32)
         params = dataclasses.replace(cfg.ba, optimize_focal="shared") if auto else cfg.ba
         backend = Timed(self.backend, timer, "ba", ("ba_step", "uncertainty_step", "reproject"))
-        corr = Timed(self.correspondence, timer, "flow", ("match", "match_pair"))
+        corr = Timed(self.correspondence, timer, "flow", ("match", "match_pair", "match_all"))
         channels = self.features.channels if self.features is not None else 0
         fe = Frontend(cfg, params, backend, corr, grid, k8, channels)
         mfilter = MotionFilter(cfg.motion_filter)
