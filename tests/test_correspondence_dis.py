@@ -95,6 +95,16 @@ def test_out_of_image_targets_have_zero_weight(image):
     assert w[2:-2, 2:-5].mean() > 0.8
 
 
+def test_a_flow_does_not_depend_on_the_calls_before_it():
+    """OpenCV's DIS keeps a leftover of an initial flow for the next call without one: not visible here."""
+    gray_i = cv2.cvtColor(texture(H, W, 5), cv2.COLOR_RGB2GRAY)
+    gray_j = warp(gray_i, np.float32([[1, 0, 6.5], [0, 1, -3.0]]))
+    fresh = DISCorrespondence().flow(gray_i, gray_j)
+    dis = DISCorrespondence()
+    dis.flow(gray_i, gray_j, np.full((H, W, 2), 5.0, np.float32))
+    assert np.array_equal(fresh, dis.flow(gray_i, gray_j))
+
+
 def test_init_flow_recovers_a_large_shift():
     h, w, dx, dy = 384, 512, 100, 5
     big = texture(h + 200, w + 200, 2)
@@ -168,3 +178,26 @@ def test_fine_preset_is_fast_with_a_finer_pyramid_and_the_filler_uses_it_by_defa
     assert fine.getFinestScale() == 1 and fast.getFinestScale() == 2
     assert fine.getPatchSize() == fast.getPatchSize() and fine.getPatchStride() == 6
     assert CorrespondenceConfig().quick_preset == "fine"
+
+
+def test_match_all_on_threads_equals_one_after_the_other():
+    """match_all spreads its calls over threads (per-thread DIS objects); results and order are unchanged."""
+    from droidw_cli.correspondence.base import MatchCall
+
+    img_i = texture(H, W, 7)
+    shifts = [(3.0, 1.0), (-5.0, 2.5), (8.0, -4.0), (1.5, 6.0)]
+    imgs = [warp(img_i, np.float32([[1, 0, dx], [0, 1, dy]])) for dx, dy in shifts]
+    init = np.full((H, W, 2), 2.0, np.float32)
+    calls = [MatchCall(img_i, im, init if k % 2 else None, both=k < 2) for k, im in enumerate(imgs)]
+    derive = lambda c: float(c.weight.sum())  # noqa: E731
+    seq = DISCorrespondence()
+    seq.concurrent_match = False
+    expected = seq.match_all(calls, derive)
+    par = DISCorrespondence()
+    got = par.match_all(calls, derive)
+    assert [len(r) for r in got] == [2, 2, 1, 1]
+    for a, b in zip(expected, got):
+        for (ca, da), (cb, db) in zip(a, b):
+            assert np.array_equal(ca.flow, cb.flow) and torch.equal(ca.weight, cb.weight) and da == db
+    with pytest.raises(ValueError):
+        par.match_all([calls[0], MatchCall(img_i, img_i[:, :W - 8])])

@@ -8,6 +8,7 @@ import torch
 
 from droidw_cli.ba.registry import get_backend
 from droidw_cli.config import load_config
+from droidw_cli.correspondence.base import CorrespondenceSource
 from droidw_cli.slam.backend import GlobalBackend, KeyframeImages
 from droidw_cli.slam.distance import frame_distance
 from droidw_cli.slam.frontend import Frontend
@@ -16,7 +17,7 @@ GRID = (24, 32)
 K8 = torch.tensor([30.0, 30.0, 16.0, 12.0])
 
 
-class _NoMatch:
+class _NoMatch(CorrespondenceSource):
     """A correspondence source that records the pairs it is asked for and returns exact-looking targets."""
 
     def __init__(self):

@@ -135,3 +135,31 @@ def test_a_later_correction_between_the_keyframes_is_spread_over_the_gap(walk):
         alpha = (k - A) / (B - A)
         moved = float((_centre(after[k]) - _centre(before[k])).norm())
         assert abs(moved - alpha * 0.12) < 0.01, (k, moved, alpha)
+
+
+def test_flows_computed_ahead_give_the_same_poses(walk):
+    """The worker thread changes when the flows run, not what they are: the same poses as synchronous flows."""
+    frames, _ = walk
+    mid = (A + B) // 2
+
+    def run(ahead: bool):
+        fe, cfg = _frontend(walk, [A, mid])
+        if not ahead:
+            fe.correspondence.concurrent_quick_target = False  # an instance attribute: this source only
+        filler = TrajectoryFiller(fe, cfg.filler)
+        assert filler._targets.ahead == ahead
+        for k in range(A + 1, mid):
+            filler.add_frame(k, k / 30.0, A, frames[k][0])
+        for k in (mid, B):  # b = mid arrives (its flows start), then B makes A's gap two keyframes old
+            if k == B:
+                img, disp, pose = frames[B]
+                fe.buffer.append(B, B / 30.0, pose, disp, img[::8, ::8])
+                fe.images[len(fe.buffer) - 1] = img
+            filler.update()
+        assert not filler._pending and not filler._targets._jobs
+        return filler.finish()
+
+    ahead, sync = run(True), run(False)
+    assert set(ahead) == set(sync)
+    for k in ahead:
+        assert torch.equal(ahead[k], sync[k]), k

@@ -149,3 +149,21 @@ def test_monocular_buffer_keeps_no_prior_and_allocates_it_with_the_first_one():
     assert buf.depth_prior[:3].abs().sum() == 0 and float(buf.depth_prior[3, 0, 0]) == 0.5
     buf.remove(0)
     assert float(buf.depth_prior[2, 0, 0]) == 0.5 and float(buf.depth_prior[3, 0, 0]) == 0.0
+
+
+def test_pending_features_are_fetched_when_first_read():
+    """A keyframe's features may be a future (extraction on a worker): read once, stored like the others."""
+    from concurrent.futures import Future
+
+    buf = KeyframeBuffer(GRID, feature_channels=4)
+    ready, pending = torch.rand(4, *GRID), Future()
+    buf.append(0, 0.0, _pose(), 1.0, np.zeros((6, 8, 3), np.uint8), ready)
+    buf.append(1, 0.1, _pose(), 1.0, np.zeros((6, 8, 3), np.uint8), pending)
+    later = torch.rand(4, *GRID)
+    pending.set_result(later)
+    block = buf.feature_block(0, 2)
+    assert block.dtype == torch.float16
+    assert torch.equal(block[1], later.half()) and torch.equal(block[0], ready.half())
+    assert isinstance(buf.features[1], torch.Tensor)  # fetched once, then kept
+    buf.remove(0)
+    assert torch.equal(buf.feature_block(0, 1)[0], later.half())

@@ -10,9 +10,11 @@ the ``droidw.correspondence`` entry-point group).
 
 from __future__ import annotations
 
+import os
 from abc import ABC, abstractmethod
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import torch
@@ -42,10 +44,32 @@ class Correspondence:
         return float(np.linalg.norm(self.flow, axis=-1).mean())
 
 
+@dataclass(frozen=True)
+class MatchCall:
+    """One call of :meth:`CorrespondenceSource.match_all`: ``match(i, j, init_flow)``, or
+    ``match_pair`` (both directions) when ``both``."""
+
+    image_i: np.ndarray
+    image_j: np.ndarray
+    init_flow: np.ndarray | None = None
+    both: bool = False
+
+
+def _usable_cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 class CorrespondenceSource(ABC):
     """Dense targets and confidences between two frames."""
 
     name: str = ""
+    #: ``quick_target`` may run on a worker thread while the other methods run on the main one
+    #: (the trajectory filler then computes its flows ahead of time); calls of ``quick_target``
+    #: itself never overlap.  False: the filler calls it synchronously.
+    concurrent_quick_target: bool = False
+    #: ``match`` and ``match_pair`` may run on several threads at once (their state is per thread):
+    #: :meth:`match_all` then spreads its calls over the usable cores
+    concurrent_match: bool = False
 
     @abstractmethod
     def match(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None = None) -> Correspondence:
@@ -84,6 +108,37 @@ class CorrespondenceSource(ABC):
         The default runs :meth:`match`; sources override it with something cheaper.
         """
         return self.match(image_i, image_j).mean_flow
+
+    def match_all(self, calls: Sequence[MatchCall], derive: Callable[[Correspondence], Any] | None = None
+                  ) -> list[list[tuple[Correspondence, Any]]]:
+        """Several :meth:`match` / :meth:`match_pair` calls; per call, its correspondences with ``derive`` of each.
+
+        ``derive`` (optional) runs beside the call that made the correspondence
+        (for per-edge maps such as the epipolar distances), None otherwise.
+        With ``concurrent_match`` the calls go to a pool of worker threads, the
+        first on the calling thread, as many at once as there are usable cores;
+        the results come back in the order of ``calls`` either way, the same as
+        one after the other.
+        """
+
+        def run(call: MatchCall) -> list[tuple[Correspondence, Any]]:
+            out = (self.match_pair(call.image_i, call.image_j, call.init_flow) if call.both
+                   else (self.match(call.image_i, call.image_j, call.init_flow),))
+            return [(c, None if derive is None else derive(c)) for c in out]
+
+        workers = min(len(calls), _usable_cores())
+        if not self.concurrent_match or workers < 2:
+            return [run(c) for c in calls]
+        size, pool = getattr(self, "_match_pool", (0, None))
+        if size < workers - 1:
+            size, pool = workers - 1, ThreadPoolExecutor(workers - 1, thread_name_prefix="droidw-match")
+            self._match_pool = (size, pool)
+        jobs = [pool.submit(run, c) for c in calls[1:]]
+        try:
+            first = run(calls[0])
+        finally:
+            wait(jobs)  # every job has finished when this returns or raises
+        return [first] + [j.result() for j in jobs]
 
     def match_many(
         self,

@@ -13,6 +13,8 @@ uses a fixed number of stripes).
 
 from __future__ import annotations
 
+import threading
+
 import cv2
 import numpy as np
 import torch
@@ -67,6 +69,8 @@ class DISCorrespondence(CorrespondenceSource):
     """
 
     name = "dis"
+    concurrent_quick_target = True  # every thread has its own DIS objects
+    concurrent_match = True
 
     def __init__(self, cfg: CorrespondenceConfig | None = None) -> None:
         cfg = cfg or CorrespondenceConfig()
@@ -78,14 +82,28 @@ class DISCorrespondence(CorrespondenceSource):
         if not cfg.photo_sigma > 0:
             raise ConfigError(f"correspondence.photo_sigma must be > 0, got {cfg.photo_sigma}")
         self.cfg = cfg
-        self._dis = create_dis(cfg.preset)
-        self._dis_quick = create_dis(MEAN_FLOW_PRESET)
-        self._dis_target = create_dis(cfg.quick_preset)
+        self._local = threading.local()  # this thread's DIS objects (an OpenCV DIS object is not thread-safe)
+
+    def _dis_of(self, name: str, seeded: bool = False):
+        """This thread's DIS object of preset ``name``, for flows with (``seeded``) or without an initial flow.
+
+        OpenCV's DIS keeps state between calls: a call without an initial flow that follows one
+        with an initial flow starts from a leftover of it (up to 4 px difference on a walk pair
+        with MEDIUM), so calls with and without one use separate objects.  Otherwise DIS keeps
+        nothing between calls, so each result depends on its inputs only, whichever thread runs it.
+        """
+        objects = self._local.__dict__.setdefault("dis", {})
+        if (name, seeded) not in objects:
+            objects[name, seeded] = create_dis(name)
+        return objects[name, seeded]
 
     def flow(self, gray_i: np.ndarray, gray_j: np.ndarray, init_flow: np.ndarray | None = None) -> np.ndarray:
         """(H, W, 2) float32 DIS flow gray_i → gray_j, optionally started from ``init_flow``."""
-        start = None if init_flow is None else np.ascontiguousarray(init_flow, dtype=np.float32).copy()
-        return np.ascontiguousarray(self._dis.calc(gray_i, gray_j, start), dtype=np.float32)
+        if init_flow is None:
+            return np.ascontiguousarray(self._dis_of(self.cfg.preset).calc(gray_i, gray_j, None), dtype=np.float32)
+        start = np.ascontiguousarray(init_flow, dtype=np.float32).copy()
+        flow = self._dis_of(self.cfg.preset, seeded=True).calc(gray_i, gray_j, start)
+        return np.ascontiguousarray(flow, dtype=np.float32)
 
     def _check(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None) -> np.ndarray | None:
         validate_image(image_i, "image_i")
@@ -123,7 +141,7 @@ class DISCorrespondence(CorrespondenceSource):
     def quick_target(self, image_i: np.ndarray, image_j: np.ndarray) -> torch.Tensor:
         """Target i → j from one DIS flow (``quick_preset``) at the working resolution (no confidence)."""
         self._check(image_i, image_j, None)
-        flow = self._dis_target.calc(to_gray(image_i), to_gray(image_j), None)
+        flow = self._dis_of(self.cfg.quick_preset).calc(to_gray(image_i), to_gray(image_j), None)
         return torch.from_numpy(flow_to_target(flow))
 
     def mean_flow(self, image_i: np.ndarray, image_j: np.ndarray) -> float:
@@ -136,5 +154,5 @@ class DISCorrespondence(CorrespondenceSource):
         s = MEAN_FLOW_SCALE if min(h, w) >= 16 * MEAN_FLOW_SCALE else 1
         size = (w // s, h // s)
         small = [cv2.resize(to_gray(im), size, interpolation=cv2.INTER_AREA) for im in (image_i, image_j)]
-        flow = self._dis_quick.calc(small[0], small[1], None)
+        flow = self._dis_of(MEAN_FLOW_PRESET).calc(small[0], small[1], None)
         return float(np.linalg.norm(flow, axis=-1).mean() * s)

@@ -56,7 +56,6 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 import torch
 from torch import Tensor
@@ -65,14 +64,11 @@ from droidw_cli.ba.types import BAState, EdgeSet
 from droidw_cli.ba.uncertainty import uncertainty_map, weight_factor, weighting_input
 from droidw_cli.config import FillerConfig
 from droidw_cli.slam.evidence import evidence_maps
+from droidw_cli.slam.filler_flow import AheadTargets, grey
 from droidw_cli.slam.optimizer import window_state
 from droidw_cli.slam.poses import compose, interpolate, invert
 
 IDENTITY = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
-
-
-def grey(image: np.ndarray) -> np.ndarray:
-    return image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
 
 
 @dataclass
@@ -103,6 +99,7 @@ class TrajectoryFiller:
         self._pending: dict[int, list[_Pending]] = {}  # anchor frame index → frames after it
         self._relative: dict[int, _Anchored] = {}  # frame index → its poses relative to its gap's keyframes
         self._stored = 0
+        self._targets = AheadTargets(frontend.correspondence)  # the flows a → t and b → t, on a worker
 
     # ---------------------------------------------------------------- feeding
     def add_frame(self, frame_index: int, timestamp: float, anchor: int, image: np.ndarray) -> None:
@@ -110,6 +107,10 @@ class TrajectoryFiller:
         kept = None if (not self.fe.initialised and self._stored >= self.max_pending) else grey(image)
         self._stored += kept is not None
         self._pending.setdefault(anchor, []).append(_Pending(frame_index, timestamp, kept))
+        buf = self.fe.buffer
+        k = len(buf) - 1
+        if kept is not None and self.fe.initialised and self.cfg.iters > 0 and buf.frame_index[k] == anchor:
+            self._targets.submit(anchor, self.fe.images[k], frame_index, kept)
 
     def keyframe_removed(self, k: int) -> None:
         """Keyframe removal is about to drop buffer index k (≥ 1): solve its gap, anchor it to k − 1."""
@@ -129,6 +130,14 @@ class TrajectoryFiller:
             k = position.get(anchor)
             if k is not None and newest - k >= self.cfg.lag:
                 self._solve(k)
+        if self.cfg.iters <= 0:
+            return
+        for anchor, frames in self._pending.items():  # start the flows b → t of the gaps that now have a b
+            k = position.get(anchor)
+            if k is not None and k + 1 < len(buf) and k + 1 in self.fe.images:
+                for p in frames:
+                    if p.image is not None:
+                        self._targets.submit(buf.frame_index[k + 1], self.fe.images[k + 1], p.frame_index, p.image)
 
     def finish(self) -> dict[int, Tensor]:
         """Solve what is left and return world-to-camera poses of every frame (keyframes included)."""
@@ -144,9 +153,14 @@ class TrajectoryFiller:
             for p in frames:
                 self._relative[p.frame_index] = _Anchored(anchor, ident.clone())
         self._pending.clear()
+        self.close()
         for f in sorted(self._relative):
             self._resolve(f, poses, ident)
         return poses
+
+    def close(self) -> None:
+        """Stop the flow worker (later solves compute their flows synchronously)."""
+        self._targets.close()
 
     def _resolve(self, f: int, poses: dict[int, Tensor], ident: Tensor) -> None:
         """poses[f] from its keyframes' final poses, resolving removed keyframes first (explicit stack)."""
@@ -204,7 +218,8 @@ class TrajectoryFiller:
         measured = [n for n, p in enumerate(frames) if p.image is not None]
         if measured and self.cfg.iters > 0:
             anchors = [k] + ([k + 1] if k + 1 < len(buf) else [])
-            init[measured] = self._refine(anchors, [frames[n].image for n in measured], init[measured])
+            init[measured] = self._refine(anchors, [frames[n] for n in measured], init[measured])
+        self._targets.forget(p.frame_index for p in frames)
         for p, pose in zip(frames, init):
             self._relative[p.frame_index] = self._anchored(pose, p.timestamp, k, k + 1)
 
@@ -229,14 +244,13 @@ class TrajectoryFiller:
         u = uncertainty_map(buf.feature_block(k, k + 1).float(), theta, unc.softplus_offset, evidence)
         return conf * weight_factor(weighting_input(u, fe.cfg.uncertainty.mode), fe.cfg.uncertainty.mode)[0]
 
-    def _refine(self, anchors: list[int], images: list[np.ndarray], init: Tensor) -> Tensor:
+    def _refine(self, anchors: list[int], frames: list[_Pending], init: Tensor) -> Tensor:
         """Motion-only IRLS BA of m frames against the anchor keyframes (fixed): (m, 7) world-to-camera poses."""
         fe, buf = self.fe, self.fe.buffer
         m, na = len(init), len(anchors)
         h, w = buf.grid
-        corr = fe.correspondence
-        target = torch.stack([corr.quick_target(grey(fe.images[k]), img)
-                              for k in anchors for img in images]).float().to(buf.device)
+        pairs = [(buf.frame_index[k], fe.images[k], p.frame_index, p.image) for k in anchors for p in frames]
+        target = torch.stack(self._targets.get(pairs)).float().to(buf.device)
         inside = ((target[..., 0] >= 0) & (target[..., 0] <= w - 1) & (target[..., 1] >= 0) & (target[..., 1] <= h - 1))
         base = torch.stack([self.anchor_weight(k) for k in anchors]).repeat_interleave(m, 0) * inside.float()
         ii = torch.arange(na, device=buf.device).repeat_interleave(m)

@@ -36,7 +36,10 @@ Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distanc
 The keyframe buffer, the edge cache, θ and the intrinsics live on the BA
 backend's device (``backend.device``); images and DIS flow stay on the host,
 and each edge's target and confidence are copied to the device once, when
-they are cached.
+they are cached.  The new edges of a keyframe are matched, each with its
+epipolar distance map, in one
+:meth:`~droidw_cli.correspondence.base.CorrespondenceSource.match_all` call,
+on as many threads as there are cores when the source allows it.
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ from droidw_cli.ba.interface import BABackend
 from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.ba.params import BAParams
 from droidw_cli.config import TrackConfig
+from droidw_cli.correspondence.base import Correspondence, MatchCall
 from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask
 from droidw_cli.dynamics.inloop import KeyframeMasks, observed_disparity
 from droidw_cli.slam import graph
@@ -89,6 +93,12 @@ def seed_disparity(fallback: torch.Tensor | float, prior: torch.Tensor | None, h
         return base.clone()
     prior = prior.to(device=device, dtype=torch.float32).reshape(*hw)
     return torch.where(prior > 0, prior, base)
+
+
+def _epipolar_of(c: Correspondence) -> np.ndarray | None:
+    """The epipolar distance map of a correspondence (:func:`droidw_cli.dynamics.epipolar.epipolar_distance`)."""
+    return epipolar_distance(c.flow, c.weight[..., 0].numpy())
+
 
 class Frontend:
     """Owns the keyframe buffer, the edge cache and the window BA."""
@@ -165,27 +175,27 @@ class Frontend:
                     init[n] = self.full_res_flow(flow[m], valid[m], size)
         first = dict(zip(todo, init))
         done: set[tuple[int, int]] = set()
+        calls, keys = [], []
         for (i, j), f0 in first.items():
             if (i, j) in done:
                 continue
-            if (j, i) in first and (j, i) not in done:  # both directions from one forward-backward pair
-                results = zip([(i, j), (j, i)], self.correspondence.match_pair(images[i], images[j], f0))
-            else:
-                results = [((i, j), self.correspondence.match(images[i], images[j], init_flow=f0))]
-            for key, c in results:
-                done.add(key)
-                self._store(key, c)
+            both = (j, i) in first and (j, i) not in done  # both directions from one forward-backward pair
+            calls.append(MatchCall(images[i], images[j], f0, both))
+            keys.append([(i, j), (j, i)] if both else [(i, j)])
+            done.update(keys[-1])
+        derive = _epipolar_of if self._segmenting else None  # on the flow's thread too
+        for ks, results in zip(keys, self.correspondence.match_all(calls, derive)):
+            for key, (c, epipolar) in zip(ks, results):
+                self._store(key, c, epipolar)
         if self._masking:
             self._mask_movers({i for i, _ in todo})
 
-    def _store(self, key: tuple[int, int], c) -> None:
+    def _store(self, key: tuple[int, int], c, epipolar: np.ndarray | None) -> None:
         self.cache.put(*key, c.target, c.weight, born=self.shared.iterations)
         if self._masking:
             self._raw[key] = c.weight
-        if self._segmenting:
-            d = epipolar_distance(c.flow, c.weight[..., 0].numpy())
-            if d is not None:
-                self._epipolar[key] = (d, c.weight)
+        if self._segmenting and epipolar is not None:
+            self._epipolar[key] = (epipolar, c.weight)
 
     def _mask_movers(self, frames: set[int]) -> None:
         """Zero the confidence of the masked pixels of these keyframes' outgoing edges.

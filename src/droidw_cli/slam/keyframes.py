@@ -12,6 +12,9 @@ uncertainty map u_t (h × w float16); thumbnails are kept JPEG-encoded.
 The tensors live on ``device``, the BA backend's (:attr:`BABackend.device`),
 from the start: a keyframe's pose, disparity, features and prior are copied
 there once, in :meth:`KeyframeBuffer.append`; the thumbnails stay on the host.
+A keyframe's features may also be *pending*, an object whose ``result()``
+gives them (a :class:`concurrent.futures.Future` of a feature extractor
+running on another thread): they are fetched the first time they are read.
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ class KeyframeBuffer:
         self.disps = torch.ones(capacity, h, w, device=dev)
         self.depth_prior: Tensor | None = None  # allocated with the first prior (RGB-D); monocular runs keep none
         self.feature_dtype = feature_dtype
-        self.features: list[Tensor | None] | None = [] if feature_channels else None  # None: archived
+        self.features: list | None = [] if feature_channels else None  # Tensor, pending, or None: archived
         self.frozen_u: dict[int, Tensor] = {}  # archived keyframe → its uncertainty map (h, w) float16
         self.frozen_conf: dict[int, Tensor] = {}  # archived keyframe → its mean edge confidence (h, w) float16
         self.frame_index: list[int] = []
@@ -75,7 +78,7 @@ class KeyframeBuffer:
         if self.features is not None:
             if features is None:
                 raise ValueError("this buffer keeps features: every keyframe needs them")
-            self.features.append(features.to(device=self.device, dtype=self.feature_dtype))
+            self.features.append(self._stored(features) if isinstance(features, Tensor) else features)
         if depth_prior is not None:
             if self.depth_prior is None:
                 self.depth_prior = torch.zeros_like(self.disps)
@@ -125,7 +128,13 @@ class KeyframeBuffer:
         block = self.features[lo:hi]
         if any(f is None for f in block):
             raise ValueError(f"keyframes in [{lo}, {hi}) were archived: their features are gone")
+        for k, f in enumerate(block):
+            if not isinstance(f, Tensor):  # pending: fetch them once
+                block[k] = self.features[lo + k] = self._stored(f.result())
         return torch.stack(block)
+
+    def _stored(self, features: Tensor) -> Tensor:
+        return features.to(device=self.device, dtype=self.feature_dtype)
 
     def archive(self, k: int, uncertainty: Tensor | None, confidence: Tensor) -> None:
         """Keyframe k left the optimisation for good: keep its u and confidence maps, drop its features."""

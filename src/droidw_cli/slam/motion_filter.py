@@ -45,16 +45,18 @@ class MotionFilter:
         self.cfg = cfg
         self._dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_FAST)
         self._last: np.ndarray | None = None
+        self._checked: tuple[np.ndarray, np.ndarray] | None = None  # (image, its small grey) of the last check
         self._since = 0
 
     def flow_stats(self, grey_a: np.ndarray, grey_b: np.ndarray) -> FlowStats:
         flow = self._dis.calc(grey_a, grey_b, None)
-        mag = np.linalg.norm(flow, axis=2) * (_SCALE / BA_SCALE)
+        mag = cv2.magnitude(flow[..., 0], flow[..., 1]) * (_SCALE / BA_SCALE)  # np.linalg.norm: 15× slower
         return FlowStats(float(mag.mean()), float(np.median(mag)))
 
     def check(self, image: np.ndarray, initialised: bool) -> tuple[bool, FlowStats]:
         """Is this frame a keyframe candidate?  The first frame always is."""
         grey = grey_small(image)
+        self._checked = (image, grey)
         if self._last is None:
             return True, FlowStats(0.0, 0.0)
         self._since += 1
@@ -67,5 +69,7 @@ class MotionFilter:
 
     def accept(self, image: np.ndarray) -> None:
         """Make this frame the reference (it became a keyframe)."""
-        self._last = grey_small(image)
+        checked = self._checked
+        self._last = checked[1] if checked is not None and checked[0] is image else grey_small(image)
+        self._checked = None
         self._since = 0

@@ -13,6 +13,7 @@ import dataclasses
 import os
 import time
 import warnings
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import cv2
@@ -71,6 +72,17 @@ class TrackResult:
         return len(self.timestamps) / self.wall_time if self.wall_time > 0 else float("nan")
 
 
+class _Pending:
+    """Features being computed on a worker; ``result()`` waits for them inside the ``features`` stage."""
+
+    def __init__(self, future: Future, timer: StageTimer):
+        self.future, self.timer = future, timer
+
+    def result(self) -> torch.Tensor:
+        with self.timer("features"):
+            return self.future.result()
+
+
 def _source_calibration(k_work: np.ndarray, preparer: FramePreparer) -> Calibration:
     """Invert the preparer's resize + crop to express working intrinsics at the source resolution."""
     (sh, sw), (rh, rw) = preparer.src_size, preparer.resized_size
@@ -117,7 +129,8 @@ class Tracker:
         self.timer = StageTimer()
 
     def _first_pass(self, items, fe: Frontend, mfilter: MotionFilter, filler: TrajectoryFiller, gba: GlobalBackend,
-                    frames: list[tuple[int, float]], bar, grid: tuple[int, int], hw: tuple[int, int]) -> None:
+                    frames: list[tuple[int, float]], bar, grid: tuple[int, int], hw: tuple[int, int],
+                    pool: ThreadPoolExecutor) -> None:
         """Motion filter, keyframes and the frontend; every other frame goes to the filler."""
         cfg, timer, s = self.cfg, self.timer, self.cfg.io.thumbnail_scale
         while True:
@@ -130,11 +143,9 @@ class Tracker:
             with timer("motion_filter"):
                 is_kf, _ = mfilter.check(image, fe.initialised)
             if is_kf:
-                feats = None
-                if self.features is not None:
-                    with timer("features"):
-                        x = torch.from_numpy(image).permute(2, 0, 1)[None].float() / 255.0
-                        feats = self.features.extract(x)[0]
+                # the features run on a worker while the frontend matches the new edges; the
+                # "features" stage is the time the BA then waits for them
+                feats = None if self.features is None else _Pending(pool.submit(self._extract, image), timer)
                 prior = None
                 if cfg.io.use_depth and depth is not None:
                     d8 = cv2.resize(depth, (grid[1], grid[0]), interpolation=cv2.INTER_NEAREST)
@@ -151,6 +162,10 @@ class Tracker:
                     filler.add_frame(frame.index, frame.timestamp, fe.buffer.frame_index[-1], image)
             bar.update(1)
             bar.set_postfix(kf=len(fe.buffer), refresh=False)
+
+    def _extract(self, image: np.ndarray) -> torch.Tensor:
+        x = torch.from_numpy(image).permute(2, 0, 1)[None].float() / 255.0
+        return self.features.extract(x)[0]
 
     def run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
         """Track ``source``; ``calibration`` None estimates the focal length (``--calib auto``)."""
@@ -177,7 +192,7 @@ class Tracker:
         k8 = torch.tensor(scale_intrinsics(np.asarray(preparer.intrinsics, dtype=np.float64), BA_SCALE), dtype=torch.float32)
         params = dataclasses.replace(cfg.ba, optimize_focal="shared") if auto else cfg.ba
         backend = Timed(self.backend, timer, "ba", ("ba_step", "uncertainty_step", "reproject"))
-        corr = Timed(self.correspondence, timer, "flow", ("match", "match_pair"))
+        corr = Timed(self.correspondence, timer, "flow", ("match", "match_pair", "match_all"))
         channels = self.features.channels if self.features is not None else 0
         fe = Frontend(cfg, params, backend, corr, grid, k8, channels)
         mfilter = MotionFilter(cfg.motion_filter)
@@ -193,9 +208,14 @@ class Tracker:
             if restore is not None:
                 source.load_depth = cfg.io.use_depth
             items = prefetched(((f, *preparer(f.image, f.depth)) for f in source), cfg.io.prefetch)
+            pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="droidw-features")
             try:
-                self._first_pass(items, fe, mfilter, filler, gba, frames, bar, grid, hw)
+                self._first_pass(items, fe, mfilter, filler, gba, frames, bar, grid, hw, pool)
+            except BaseException:
+                filler.close()  # stops the filler's flow worker
+                raise
             finally:
+                pool.shutdown(wait=True, cancel_futures=True)
                 items.close()  # stops the prefetch thread, also after an error
                 if restore is not None:
                     source.load_depth = restore
