@@ -68,6 +68,12 @@ class CpuBackend(BABackend):
     def device(self) -> torch.device:
         return torch.device("cpu")
 
+    def release(self) -> None:
+        """Forget the cached feature table, projection and edge check (rebuilt on the next call)."""
+        self._features.clear()
+        self._projections.clear()
+        self._checked_edges = None
+
     # ----------------------------------------------------------------- helpers
     def _prepare(self, state: BAState, edges: EdgeSet | None = None) -> tuple[BAState, EdgeSet | None]:
         """The state (and edges) on this backend's device, float32, int64 indices."""

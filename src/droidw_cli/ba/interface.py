@@ -65,6 +65,14 @@ class BABackend(ABC):
         edge: θ is returned unchanged with loss 0.
         """
 
+    def release(self) -> None:
+        """Drop whatever the backend keeps between calls to reuse work (caches of the last window).
+
+        The tracker calls it after its last BA, so that the end of a run (masks,
+        uncertainty maps, the result) does not hold on to a window's worth of
+        cached features.  It must never change a later result; the default keeps nothing.
+        """
+
 
 def _all_finite(t: Tensor) -> bool:
     """True when every element is finite (a one-pass sum first; the exact test only if it fails)."""

@@ -211,6 +211,7 @@ class Tracker:
                 )
             with timer("global_ba"):
                 gba.finish()
+            self.backend.release()  # the last BA has run: its cached window features are dead weight
             with timer("dynamics"):
                 dyn = _dynamic_record(fe, preparer)
 
