@@ -144,12 +144,22 @@ class KeyframeBuffer:
             out[k] = self.thumbnail(k)
         return out
 
-    def feature_block(self, lo: int, hi: int) -> Tensor:
-        """Features (hi − lo, C, h, w) of keyframes [lo, hi), none of them archived."""
+    def feature_block(self, lo: int, hi: int, dtype: torch.dtype | None = None) -> Tensor:
+        """Features (hi − lo, C, h, w) of keyframes [lo, hi), none of them archived.
+
+        ``dtype`` (default: the stored one) converts each keyframe straight into the
+        result, without a stacked copy in the stored dtype on the way.
+        """
         block = self.features[lo:hi]
         if any(f is None for f in block):
             raise ValueError(f"keyframes in [{lo}, {hi}) were archived: their features are gone")
-        return torch.stack(block)
+        if dtype is None or dtype == self.feature_dtype or not block:
+            out = torch.stack(block)
+            return out if dtype is None else out.to(dtype)
+        out = torch.empty((len(block), *block[0].shape), dtype=dtype, device=self.device)
+        for row, f in zip(out, block):
+            row.copy_(f)
+        return out
 
     def archive(self, k: int, uncertainty: Tensor | None, confidence: Tensor) -> None:
         """Keyframe k left the optimisation for good: keep its u and confidence maps, drop its features."""
