@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from droidw_cli.io.jpeg import decode_rgb, encode_rgb
+from droidw_cli.io.jpeg import JpegStack, decode_rgb, encode_rgb
 
 #: JPEG quality of the stored thumbnails (37 KB raw at 96 × 128 → a few KB; a long video keeps thousands)
 THUMBNAIL_QUALITY = 95
@@ -62,6 +62,7 @@ class KeyframeBuffer:
         self.frame_index: list[int] = []
         self.timestamps: list[float] = []
         self.thumbnails: list[np.ndarray] = []  # JPEG bytes (quality THUMBNAIL_QUALITY), see thumbnail()
+        self._thumb_shape: tuple[int, ...] = (1, 1, 3)  # of the decoded thumbnails
         self.has_prior = False
 
     def __len__(self) -> int:
@@ -135,14 +136,9 @@ class KeyframeBuffer:
         """Keyframe k's RGB thumbnail (decoded; JPEG at quality THUMBNAIL_QUALITY)."""
         return decode_rgb(self.thumbnails[k])
 
-    def thumbnail_stack(self) -> np.ndarray:
-        """(K, H/s, W/s, 3) uint8: every thumbnail, decoded into one array."""
-        if not self.count:
-            return np.zeros((0, 1, 1, 3), np.uint8)
-        out = np.empty((self.count, *self._thumb_shape), np.uint8)
-        for k in range(self.count):
-            out[k] = self.thumbnail(k)
-        return out
+    def thumbnail_stack(self) -> JpegStack:
+        """(K, H/s, W/s, 3) uint8: every thumbnail, still encoded (``np.asarray`` decodes them all)."""
+        return JpegStack(self.thumbnails[:self.count], self._thumb_shape)
 
     def feature_block(self, lo: int, hi: int, dtype: torch.dtype | None = None) -> Tensor:
         """Features (hi − lo, C, h, w) of keyframes [lo, hi), none of them archived.
