@@ -84,7 +84,7 @@ def account(fe, gba, filler) -> dict[str, int]:
         "masks": nbytes([m.images, m.masks, m.current]),
         "gba.images": gba.images.nbytes,
         "filler.pending": nbytes(filler._pending),
-        "filler.relative": nbytes(filler._relative),
+        "filler.relative": getattr(filler._relative, "nbytes", None) or nbytes(filler._relative),
     }
 
 

@@ -54,3 +54,64 @@ def test_feature_block_converts_without_changing_values():
     fe = _frontend_with_features(5)
     block = fe.buffer.feature_block(1, 4, torch.float32)
     assert block.dtype == torch.float32 and torch.equal(block, fe.buffer.feature_block(1, 4).float())
+
+
+def test_thumbnails_stay_encoded_and_decode_to_the_same_images():
+    from droidw_cli.slam.keyframes import KeyframeBuffer
+
+    buf = KeyframeBuffer(GRID, capacity=2)
+    assert np.asarray(buf.thumbnail_stack()).shape == (0, 1, 1, 3)
+    ramp = np.add.outer(np.arange(12) * 8, np.arange(16) * 6)
+    thumbs = [np.stack([ramp + 10 * k, ramp[::-1] + 5, 200 - ramp], -1).astype(np.uint8) for k in range(4)]
+    for k, t in enumerate(thumbs):
+        buf.append(k, k / 30.0, torch.tensor([0, 0, 0, 0, 0, 0, 1.0]), 1.0, t)
+    stack = buf.thumbnail_stack()
+    assert stack.shape == (4, 12, 16, 3) and len(stack) == 4 and stack.dtype == np.uint8
+    every = np.asarray(stack)
+    assert every.shape == stack.shape and every.dtype == np.uint8
+    for k in range(4):
+        assert np.array_equal(every[k], buf.thumbnail(k)) and np.array_equal(stack[k], every[k])
+        assert np.abs(every[k].astype(int) - thumbs[k]).mean() < 3  # JPEG, quality 95
+    assert np.array_equal(stack[1:3], every[1:3])
+
+
+def test_keyframe_arrays_keep_the_stored_dtypes():
+    """The result holds float16 confidence, int16 ids and encoded thumbnails; keyframes.npz is unchanged."""
+    from types import SimpleNamespace
+
+    from droidw_cli.export.run_files import keyframe_arrays
+    from droidw_cli.io.jpeg import JpegStack, encode_rgb
+
+    k, (h, w) = 3, GRID
+    image = np.full((4, 4, 3), 100, np.uint8)
+    result = SimpleNamespace(
+        kf_index=np.arange(k), kf_timestamps=np.arange(k, dtype=np.float64), kf_poses_c2w=np.zeros((k, 4, 4)),
+        kf_disps=np.ones((k, h, w), np.float32), intrinsics_work=np.ones(4), work_size=(48, 64),
+        kf_images=JpegStack([encode_rgb(image, 95)] * k, image.shape),
+        kf_confidence=np.full((k, h, w), 0.5, np.float16), kf_dynamic=np.zeros((k, h, w), bool),
+        kf_object_ids=np.full((k, h, w), -1, np.int16), objects=np.zeros((0, 8)),
+        kf_uncertainty=np.ones((k, h, w), np.float32), kf_features=None, theta=None)
+    arrays = keyframe_arrays(result)
+    assert arrays["images"].shape == (k, 4, 4, 3) and arrays["images"].dtype == np.uint8
+    assert arrays["confidence"].dtype == np.float16 and arrays["object_ids"].dtype == np.int32
+    assert arrays["disps"].dtype == np.float32 and arrays["uncertainty"].dtype == np.float32
+    assert arrays["dynamic"].dtype == bool and int(arrays["object_ids"].min()) == -1
+
+
+def test_anchor_table_returns_what_was_put_across_growth():
+    from droidw_cli.slam.filler import AnchorTable, _Anchored
+
+    g = torch.Generator().manual_seed(1)
+    table, put = AnchorTable(), {}
+    for f in range(2500):  # past two growth steps
+        rec = (_Anchored(f // 9, torch.randn(7, generator=g)) if f % 5 == 0 else
+               _Anchored(f // 9, torch.randn(7, generator=g), f // 9 + 9, torch.randn(7, generator=g), f / 2500))
+        table[f * 3] = put[f * 3] = rec
+    table[3] = put[3] = _Anchored(7, torch.ones(7))  # an overwrite keeps its row
+    assert len(table) == 2500 and 3 in table and 4 not in table and table.get(4) is None
+    assert list(table) == list(put)
+    for f, rec in put.items():
+        got = table.get(f)
+        assert (got.a, got.b, got.alpha) == (rec.a, rec.b, rec.alpha)
+        assert torch.equal(got.rel_a, rec.rel_a)
+        assert (got.rel_b is None) == (rec.rel_b is None) and (rec.rel_b is None or torch.equal(got.rel_b, rec.rel_b))
