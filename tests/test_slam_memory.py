@@ -115,3 +115,25 @@ def test_anchor_table_returns_what_was_put_across_growth():
         assert (got.a, got.b, got.alpha) == (rec.a, rec.b, rec.alpha)
         assert torch.equal(got.rel_a, rec.rel_a)
         assert (got.rel_b is None) == (rec.rel_b is None) and (rec.rel_b is None or torch.equal(got.rel_b, rec.rel_b))
+
+
+def test_packed_masks_behave_like_a_list_of_bool_tensors():
+    from droidw_cli.dynamics.inloop import PackedMasks
+
+    g = torch.Generator().manual_seed(2)
+    masks = PackedMasks((5, 7))  # 35 pixels: not a multiple of 8
+    ref = [torch.rand(5, 7, generator=g) > 0.5 for _ in range(4)]
+    for m in ref:
+        masks.append(m)
+    other = torch.rand(5, 7, generator=g) > 0.7
+    masks[2] |= other
+    ref[2] = ref[2] | other
+    masks[0] = np.zeros((5, 7), bool)
+    ref[0] = torch.zeros(5, 7, dtype=torch.bool)
+    del masks[1], ref[1]
+    assert len(masks) == 3
+    assert all(torch.equal(a, b) and a.dtype == torch.bool for a, b in zip(masks, ref))
+    assert np.array_equal(masks.stacked(), torch.stack(ref).numpy())
+    assert PackedMasks((5, 7)).stacked().shape == (0, 5, 7)
+    with pytest.raises(ValueError):
+        masks.append(torch.zeros(7, 5, dtype=torch.bool))
