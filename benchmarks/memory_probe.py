@@ -3,9 +3,10 @@
     python benchmarks/memory_probe.py [--minutes 1] [--every 100] [--preset walk] [--seed 1]
 
 Streams a synthetic preset (as ``track_bench.py --memory-minutes`` does) and,
-every ``--every`` new keyframes, prints the resident set size (RSS, and RSS
-after ``malloc_trim`` — what the heap could hand back: the rest is live or
-fragmented), the peak RSS so far, and the bytes held by each long-lived
+every ``--every`` new keyframes, prints the resident set size (RSS; with
+``--trim`` also RSS after ``malloc_trim``, what the heap could hand back: the
+rest is live or fragmented; trimming changes the later peaks), the peak RSS
+so far, and the bytes held by each long-lived
 structure of the run: the keyframe buffer, the frontend's images, edge cache
 and dynamic masks, the backend's JPEG images and the filler's per-frame
 records.  At the end it prints the same after the final global BA and after
@@ -95,6 +96,7 @@ def main() -> None:
     ap.add_argument("--preset", default="walk")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--trim", action="store_true", help="also print RSS after malloc_trim(0)")
     args = ap.parse_args()
 
     from droidw_cli.io.calibration import Calibration
@@ -114,7 +116,8 @@ def main() -> None:
             print("tag kf frames_filled rss trimmed peak " + " ".join(keys) + " total (all MB)", flush=True)
         tot = sum(acc.values())
         cells = " ".join(f"{v / 2**20:.1f}" for v in acc.values())
-        print(f"{tag} {len(fe.buffer)} {len(filler._relative)} {rss_mb():.0f} {rss_mb(True):.0f} {peak_mb():.0f} "
+        trimmed = f"{rss_mb(True):.0f}" if args.trim else "-"
+        print(f"{tag} {len(fe.buffer)} {len(filler._relative)} {rss_mb():.0f} {trimmed} {peak_mb():.0f} "
               f"{cells} {tot / 2**20:.1f}  [{time.perf_counter() - seen['t0']:.0f} s]", flush=True)
 
     original_gba = tracker_mod.GlobalBackend
@@ -130,7 +133,7 @@ def main() -> None:
 
         def finish(self):
             report("before_final", self.fe, self, ProbedBackend.filler)
-            phase("first pass")
+            phase("first pass (peak columns above: since the start)")
             out = super().finish()
             phase("final global BA")
             report("after_final", self.fe, self, ProbedBackend.filler)
@@ -149,8 +152,11 @@ def main() -> None:
             phase("filler.finish")
             return out
 
+    peaks: list[float] = []
+
     def phase(name: str) -> None:
-        print(f"phase {name}: peak {hwm_mb(reset=True):.0f} MB, rss now {rss_mb():.0f} MB", flush=True)
+        peaks.append(hwm_mb(reset=True))
+        print(f"phase {name}: peak {peaks[-1]:.0f} MB, rss now {rss_mb():.0f} MB", flush=True)
 
     original_dyn = tracker_mod._dynamic_record
 
@@ -169,7 +175,7 @@ def main() -> None:
     phase("result")
     arrays = {k: v.nbytes for k, v in vars(result).items() if isinstance(v, np.ndarray)}
     print(f"result: frames {len(result.timestamps)} keyframes {len(result.kf_index)} {seconds:.0f} s "
-          f"rss {rss_mb():.0f} trimmed {rss_mb(True):.0f} peak {peak_mb():.0f} MB")
+          f"rss {rss_mb():.0f} MB; peak of the whole run {max(peaks):.0f} MB")
     print("result arrays MB: " + " ".join(f"{k}={v / 2**20:.1f}" for k, v in arrays.items() if v > 2**16))
 
 
