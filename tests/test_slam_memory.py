@@ -137,3 +137,26 @@ def test_packed_masks_behave_like_a_list_of_bool_tensors():
     assert PackedMasks((5, 7)).stacked().shape == (0, 5, 7)
     with pytest.raises(ValueError):
         masks.append(torch.zeros(7, 5, dtype=torch.bool))
+
+
+def test_channels_last_features_are_what_the_cpu_feature_table_builds():
+    """The CPU backend gets float32 channels-last features: the same table as from the float16 stack, no copy."""
+    from droidw_backend_cpu.uncertainty import FeatureTable
+
+    from droidw_cli.slam.optimizer import window_state
+
+    fe = _frontend_with_features(6)
+    assert fe.backend.feature_layout == "float32_channels_last"
+    st = window_state(fe.buffer, 1, 5, fe.shared, True, "float32_channels_last")
+    stored = window_state(fe.buffer, 1, 5, fe.shared, True)
+    assert stored.features.dtype == torch.float16 and st.features.dtype == torch.float32
+    assert st.features.is_contiguous(memory_format=torch.channels_last)
+    table = FeatureTable()
+    cl, norms = table.get(st.features)
+    assert cl is st.features  # used as it is
+    ref_cl, ref_norms = FeatureTable().get(stored.features)
+    assert torch.equal(cl, ref_cl) and torch.equal(norms, ref_norms)
+    theta = torch.tensor([*fe.shared.theta[:4].tolist(), 0.3])  # θ[:C] and the bias, no map inputs
+    assert torch.equal(table.logits(cl, theta), FeatureTable().logits(stored.features, theta))
+    with pytest.raises(ValueError, match="layout"):
+        window_state(fe.buffer, 1, 5, fe.shared, True, "bogus")

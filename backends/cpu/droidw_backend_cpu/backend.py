@@ -51,6 +51,7 @@ class CpuBackend(BABackend):
     """
 
     name = "cpu"
+    feature_layout = "float32_channels_last"  # the FeatureTable uses such features as they are
 
     def __init__(self, chunk_bytes: int = DEFAULT_CHUNK_BYTES,
                  feature_chunk_bytes: int = DEFAULT_FEATURE_CHUNK_BYTES) -> None:

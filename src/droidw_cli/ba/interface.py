@@ -22,6 +22,10 @@ class BABackend(ABC):
 
     #: registry name, e.g. ``"cpu"``
     name: str = ""
+    #: the features the tracker puts in a window's :class:`BAState`: ``"stored"`` (the keyframe
+    #: buffer's dtype, channels-first) or ``"float32_channels_last"`` (what the CPU backend computes
+    #: on; converted from the buffer directly, the window needs no stacked float16 copy beside it)
+    feature_layout: str = "stored"
 
     @classmethod
     @abstractmethod
