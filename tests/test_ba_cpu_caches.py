@@ -184,3 +184,15 @@ def test_inference_mode_tensors_work_without_reuse(problem):
     backend.uncertainty_step(st, ed, BAParams())
     res = backend.ba_step(st, ed, BAParams())
     assert torch.equal(res.state.poses, ref.state.poses) and torch.equal(res.state.disps, ref.state.disps)
+
+
+def test_release_drops_the_caches_and_changes_no_result(problem):
+    state, edges = problem
+    backend = CpuBackend()
+    backend.uncertainty_step(state, edges, TRACKER)
+    first = backend.ba_step(state, edges, TRACKER)
+    assert backend._features._value is not None and backend._projections._entry is not None
+    backend.release()
+    assert backend._features._value is None and backend._projections._entry is None
+    again = backend.ba_step(state, edges, TRACKER)
+    assert torch.equal(again.state.poses, first.state.poses) and again.cost == first.cost

@@ -9,7 +9,7 @@ import torch
 from droidw_cli.config import MotionFilterConfig
 from droidw_cli.slam import graph
 from droidw_cli.slam.distance import frame_distance, transfer_disparity
-from droidw_cli.slam.keyframes import KeyframeBuffer
+from droidw_cli.slam.keyframes import GROW_MIN, KeyframeBuffer, grown_capacity
 from droidw_cli.slam.motion_filter import MotionFilter
 from droidw_cli.slam.parallax import homography_parallax
 
@@ -144,7 +144,7 @@ def test_monocular_buffer_keeps_no_prior_and_allocates_it_with_the_first_one():
         buf.append(k, k / 30.0, _pose(), 1.0, np.zeros((2, 2, 3), np.uint8))
     assert buf.depth_prior is None and not buf.has_prior
     buf.append(3, 0.1, _pose(), 1.0, np.zeros((2, 2, 3), np.uint8), depth_prior=torch.full((6, 8), 0.5))
-    buf.append(4, 0.2, _pose(), 1.0, np.zeros((2, 2, 3), np.uint8))  # grows past the capacity of 4
+    buf.append(4, 0.2, _pose(), 1.0, np.zeros((2, 2, 3), np.uint8))
     assert buf.has_prior and buf.depth_prior.shape == buf.disps.shape
     assert buf.depth_prior[:3].abs().sum() == 0 and float(buf.depth_prior[3, 0, 0]) == 0.5
     buf.remove(0)
@@ -167,3 +167,22 @@ def test_pending_features_are_fetched_when_first_read():
     assert isinstance(buf.features[1], torch.Tensor)  # fetched once, then kept
     buf.remove(0)
     assert torch.equal(buf.feature_block(0, 1)[0], later.half())
+
+
+def test_capacity_grows_by_a_quarter_and_keeps_every_value():
+    """Growth copies the rows into a larger tensor (poses, disparities, prior) and fills the new ones."""
+    assert grown_capacity(2) == 2 + GROW_MIN and grown_capacity(1024) == 1280
+    buf = KeyframeBuffer((3, 4), capacity=2)
+    n = 2 + GROW_MIN + 1  # two growth steps
+    for k in range(n):
+        prior = torch.full((3, 4), 0.5 + k) if k >= 1 else None
+        buf.append(k, k / 30.0, _pose((float(k), 0, 0)), float(k + 1), np.zeros((2, 2, 3), np.uint8),
+                   depth_prior=prior)
+    assert len(buf) == n and buf.capacity == grown_capacity(grown_capacity(2))
+    assert torch.equal(buf.poses[:n, 0], torch.arange(n, dtype=torch.float32))
+    assert torch.equal(buf.disps[:n, 1, 2], torch.arange(1, n + 1, dtype=torch.float32))
+    assert float(buf.depth_prior[0].abs().sum()) == 0.0
+    assert torch.equal(buf.depth_prior[1:n, 0, 0], 0.5 + torch.arange(1, n, dtype=torch.float32))
+    # the rows past the count hold the fill values: identity pose, disparity 1, no prior
+    assert torch.equal(buf.poses[n:], torch.tensor([0, 0, 0, 0, 0, 0, 1.0]).expand(buf.capacity - n, 7))
+    assert bool((buf.disps[n:] == 1.0).all()) and bool((buf.depth_prior[n:] == 0.0).all())

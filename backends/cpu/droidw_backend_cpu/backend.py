@@ -51,6 +51,7 @@ class CpuBackend(BABackend):
     """
 
     name = "cpu"
+    feature_layout = "float32_channels_last"  # the FeatureTable uses such features as they are
 
     def __init__(self, chunk_bytes: int = DEFAULT_CHUNK_BYTES,
                  feature_chunk_bytes: int = DEFAULT_FEATURE_CHUNK_BYTES) -> None:
@@ -67,6 +68,12 @@ class CpuBackend(BABackend):
     @property
     def device(self) -> torch.device:
         return torch.device("cpu")
+
+    def release(self) -> None:
+        """Forget the cached feature table, projection and edge check (rebuilt on the next call)."""
+        self._features.clear()
+        self._projections.clear()
+        self._checked_edges = None
 
     # ----------------------------------------------------------------- helpers
     def _prepare(self, state: BAState, edges: EdgeSet | None = None) -> tuple[BAState, EdgeSet | None]:

@@ -52,6 +52,7 @@ class CudaBackend(CpuBackend):
     """Uncertainty-aware dense BA with CUDA kernels (same maths as the CPU backend)."""
 
     name = "cuda"
+    feature_layout = "stored"  # float16 on the GPU; the kernels take channels-first features
 
     def __init__(self, device: str | torch.device = "cuda") -> None:
         super().__init__()

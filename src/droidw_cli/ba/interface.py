@@ -22,6 +22,10 @@ class BABackend(ABC):
 
     #: registry name, e.g. ``"cpu"``
     name: str = ""
+    #: the features the tracker puts in a window's :class:`BAState`: ``"stored"`` (the keyframe
+    #: buffer's dtype, channels-first) or ``"float32_channels_last"`` (what the CPU backend computes
+    #: on; converted from the buffer directly, the window needs no stacked float16 copy beside it)
+    feature_layout: str = "stored"
 
     @classmethod
     @abstractmethod
@@ -63,6 +67,14 @@ class BABackend(ABC):
         :mod:`droidw_cli.ba.uncertainty` (per-keyframe edge averaging, E_sim only
         on edges with |frame_id_i − frame_id_j| ≥ min_frame_gap).  No E_sim
         edge: θ is returned unchanged with loss 0.
+        """
+
+    def release(self) -> None:
+        """Drop whatever the backend keeps between calls to reuse work (caches of the last window).
+
+        The tracker calls it after its last BA, so that the end of a run (masks,
+        uncertainty maps, the result) does not hold on to a window's worth of
+        cached features.  It must never change a later result; the default keeps nothing.
         """
 
 

@@ -4,7 +4,8 @@
 indices, renumbered on keyframe removal).  Per keyframe k it keeps the colour
 on the 1/8 grid and M_k, the union of every dynamic mask its pixels were ever
 given (scene consistency, epipolar), which is what BA zeroes and what the
-static map leaves out.
+static map leaves out.  The masks are kept bit-packed (:class:`PackedMasks`);
+with the grid colour (9 KB at 48 × 64) about 10 KB a keyframe.
 
 Scene consistency for a new keyframe k (ADD-SLAM, with the map's render
 replaced by the reprojection of earlier keyframes), with S = the
@@ -39,6 +40,52 @@ from droidw_cli.dynamics.warp import predict_views
 MAX_MASKED = 0.5
 
 
+class PackedMasks:
+    """A list of (h, w) bool masks kept bit-packed (384 bytes at 48 × 64 instead of 3 KB plus a tensor's overhead).
+
+    Reading ``masks[k]`` unpacks a fresh bool tensor; ``masks[k] = mask`` packs
+    one, so ``masks[k] |= other`` works as for a list of tensors.  A long video
+    keeps two of these per keyframe (the union and the current consistency mask).
+    """
+
+    def __init__(self, grid: tuple[int, int]):
+        self.grid = grid
+        self._bits: list[np.ndarray] = []
+
+    def __len__(self) -> int:
+        return len(self._bits)
+
+    def _pack(self, mask: Tensor | np.ndarray) -> np.ndarray:
+        m = mask.detach().cpu().numpy() if isinstance(mask, Tensor) else np.asarray(mask)
+        if m.shape != self.grid:
+            raise ValueError(f"mask of shape {m.shape}, expected {self.grid}")
+        return np.packbits(m.astype(bool, copy=False).reshape(-1))
+
+    def _unpack(self, bits: np.ndarray) -> np.ndarray:
+        return np.unpackbits(bits, count=self.grid[0] * self.grid[1]).view(bool).reshape(self.grid)
+
+    def append(self, mask: Tensor | np.ndarray) -> None:
+        self._bits.append(self._pack(mask))
+
+    def __getitem__(self, k: int) -> Tensor:
+        return torch.from_numpy(self._unpack(self._bits[k]))
+
+    def __setitem__(self, k: int, mask: Tensor | np.ndarray) -> None:
+        self._bits[k] = self._pack(mask)
+
+    def __delitem__(self, k: int) -> None:
+        del self._bits[k]
+
+    def __iter__(self):
+        return (self[k] for k in range(len(self)))
+
+    def stacked(self) -> np.ndarray:
+        """(K, h, w) bool: every mask."""
+        if not self._bits:
+            return np.zeros((0, *self.grid), dtype=bool)
+        return np.stack([self._unpack(b) for b in self._bits])
+
+
 def grid_image(image: np.ndarray, grid: tuple[int, int]) -> Tensor:
     """Working-size RGB uint8 (H, W, 3) → (h, w, 3) uint8 on the BA grid (area average)."""
     return torch.from_numpy(cv2.resize(image, (grid[1], grid[0]), interpolation=cv2.INTER_AREA))
@@ -63,8 +110,8 @@ class KeyframeMasks:
         self.params = params or DetectionParams()
         self.segmenter = get_segmenter(cfg.segmenter, self.params) if consistency else None
         self.images: list[Tensor] = []  # (h, w, 3) uint8 on the grid: 9 KB a keyframe at 48 × 64, see image()
-        self.masks: list[Tensor] = []  # union of every mask ever given (the map leaves these out)
-        self.current: list[Tensor] = []  # the latest consistency mask (BA zeroes these)
+        self.masks = PackedMasks(grid)  # union of every mask ever given (the map leaves these out)
+        self.current = PackedMasks(grid)  # the latest consistency mask (BA zeroes these)
         self.times: list[float] = []  # keyframe timestamps (object motion over time)
 
     def __len__(self) -> int:
@@ -74,8 +121,8 @@ class KeyframeMasks:
         """Register a new keyframe (its working-size image and timestamp)."""
         self.images.append(grid_image(image, self.grid))
         self.times.append(float(len(self.times) if timestamp is None else timestamp))
-        self.masks.append(torch.zeros(self.grid, dtype=torch.bool))
-        self.current.append(torch.zeros(self.grid, dtype=torch.bool))
+        self.masks.append(np.zeros(self.grid, dtype=bool))
+        self.current.append(np.zeros(self.grid, dtype=bool))
 
     def image(self, k: int) -> Tensor:
         """Keyframe k's colour on the grid, (h, w, 3) float32 in [0, 1]."""
@@ -96,8 +143,9 @@ class KeyframeMasks:
 
     def set_current(self, k: int, mask: Tensor | None) -> None:
         """Keyframe k's consistency mask for BA is now ``mask`` (None: no mask); it also joins the record."""
-        self.current[k] = torch.zeros(self.grid, dtype=torch.bool) if mask is None else mask.detach().cpu().bool()
-        self.masks[k] |= self.current[k]
+        current = torch.zeros(self.grid, dtype=torch.bool) if mask is None else mask.detach().cpu().bool()
+        self.current[k] = current
+        self.masks[k] |= current
 
     def sources(self, k: int, n: int) -> list[int]:
         """The ``consistency_sources`` keyframes before k (after k for the first keyframe) among the first n."""
@@ -133,6 +181,4 @@ class KeyframeMasks:
 
     def stacked(self) -> np.ndarray:
         """(K, h, w) bool: every keyframe's union mask."""
-        if not self.masks:
-            return np.zeros((0, *self.grid), dtype=bool)
-        return torch.stack(self.masks).numpy().copy()
+        return self.masks.stacked()

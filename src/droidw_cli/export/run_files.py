@@ -26,23 +26,23 @@ RUN_FILES = ("traj.txt", "keyframes.npz", "calib.txt", "run.json")
 
 
 def keyframe_arrays(result) -> dict[str, np.ndarray]:
-    """The arrays stored in ``keyframes.npz``."""
+    """The arrays stored in ``keyframes.npz`` (copies only where the result holds another dtype)."""
     arrays = {
         "index": result.kf_index,
         "timestamps": result.kf_timestamps,
         "poses_c2w": result.kf_poses_c2w,
-        "disps": result.kf_disps.astype(np.float32),
+        "disps": result.kf_disps.astype(np.float32, copy=False),
         "intrinsics": np.asarray(result.intrinsics_work, dtype=np.float64),
         "work_size": np.array(result.work_size, dtype=np.int64),
-        "images": result.kf_images,
-        "confidence": result.kf_confidence.astype(np.float16),
+        "images": np.asarray(result.kf_images, dtype=np.uint8),  # the result keeps them JPEG-encoded
+        "confidence": result.kf_confidence.astype(np.float16, copy=False),
     }
     if result.kf_dynamic is not None:
-        arrays["dynamic"] = result.kf_dynamic.astype(bool)
-        arrays["object_ids"] = result.kf_object_ids.astype(np.int32)
-        arrays["objects"] = result.objects.astype(np.float64)
+        arrays["dynamic"] = result.kf_dynamic.astype(bool, copy=False)
+        arrays["object_ids"] = result.kf_object_ids.astype(np.int32)  # the result keeps int16
+        arrays["objects"] = result.objects.astype(np.float64, copy=False)
     if result.kf_uncertainty is not None:
-        arrays["uncertainty"] = result.kf_uncertainty.astype(np.float32)
+        arrays["uncertainty"] = result.kf_uncertainty.astype(np.float32, copy=False)
         arrays["features"] = result.kf_features
         arrays["theta"] = result.theta
     return arrays

@@ -68,6 +68,9 @@ from droidw_cli.slam.poses import extrapolate
 
 #: proximity edges are sought for the keyframes this close to the newest (DROID: t1 − 5)
 PROXIMITY_RECENT = 5
+#: :meth:`Frontend.uncertainty` computes the evidence maps of this many keyframes at a time (all 200
+#: of the backend's horizon at once reproject some 2000 edges, a few hundred MB at a run's end)
+UNCERTAINTY_CHUNK = 32
 
 
 
@@ -397,9 +400,12 @@ class Frontend:
         out = torch.zeros(hi - lo, *buf.grid, device=buf.device)
         if live:
             a, b = live[0], live[-1] + 1  # archived keyframes are the oldest: the live ones are contiguous
-            u = uncertainty_map(buf.feature_block(a, b).float(), theta, self.params.uncertainty.softplus_offset,
-                                self.evidence(a, b))
-            out[a - lo:b - lo] = u
+            # evidence in chunks of keyframes (a frame's maps read only its own edges: the same values), the
+            # affine map over the whole range at once (its matrix product rounds differently per batch size)
+            chunks = [self.evidence(c, min(b, c + UNCERTAINTY_CHUNK)) for c in range(a, b, UNCERTAINTY_CHUNK)]
+            maps = None if chunks[0] is None else torch.cat(chunks)
+            out[a - lo:b - lo] = uncertainty_map(buf.feature_block(a, b, torch.float32), theta,
+                                                 self.params.uncertainty.softplus_offset, maps)
         for k, u in buf.frozen_u.items():
             if lo <= k < hi:
                 out[k - lo] = u.float()

@@ -15,6 +15,13 @@ there once, in :meth:`KeyframeBuffer.append`; the thumbnails stay on the host.
 A keyframe's features may also be *pending*, an object whose ``result()``
 gives them (a :class:`concurrent.futures.Future` of a feature extractor
 running on another thread): they are fetched the first time they are read.
+
+Memory against video length: the pose/disparity/prior tensors grow by a
+quarter (at least ``GROW_MIN`` rows) into a fresh tensor that the old rows are
+copied into, so a long video holds at most 25 % slack and a growth step needs
+the old plus the new tensor (2.25× the rows), not the 3× of doubling with
+``torch.cat`` (old, the appended block and the result).  At 48 × 64 the
+disparity row is 12 KB: 2000 keyframes are 24 MB.
 """
 
 from __future__ import annotations
@@ -23,14 +30,22 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from droidw_cli.io.jpeg import decode_rgb, encode_rgb
+from droidw_cli.io.jpeg import JpegStack, decode_rgb, encode_rgb
 
 #: JPEG quality of the stored thumbnails (37 KB raw at 96 × 128 → a few KB; a long video keeps thousands)
 THUMBNAIL_QUALITY = 95
+#: the capacity grows by GROW_FACTOR, by at least GROW_MIN keyframes
+GROW_FACTOR = 1.25
+GROW_MIN = 64
+
+
+def grown_capacity(capacity: int) -> int:
+    """The next capacity after ``capacity`` (full): +25 %, at least +GROW_MIN."""
+    return max(capacity + GROW_MIN, int(capacity * GROW_FACTOR))
 
 
 class KeyframeBuffer:
-    """Growable storage for keyframe state (capacity doubles when full)."""
+    """Growable storage for keyframe state (capacity grows by :func:`grown_capacity` when full)."""
 
     def __init__(self, grid: tuple[int, int], feature_channels: int = 0, feature_dtype=torch.float16,
                  capacity: int = 64, device: torch.device | str = "cpu"):
@@ -50,19 +65,29 @@ class KeyframeBuffer:
         self.frame_index: list[int] = []
         self.timestamps: list[float] = []
         self.thumbnails: list[np.ndarray] = []  # JPEG bytes (quality THUMBNAIL_QUALITY), see thumbnail()
+        self._thumb_shape: tuple[int, ...] = (1, 1, 3)  # of the decoded thumbnails
         self.has_prior = False
 
     def __len__(self) -> int:
         return self.count
 
-    def _grow(self) -> None:
-        def grown(t: Tensor, fill: float) -> Tensor:
-            extra = torch.full_like(t, fill)
-            return torch.cat([t, extra], 0)
+    @property
+    def capacity(self) -> int:
+        return self.poses.shape[0]
 
-        new_poses = grown(self.poses, 0.0)
-        new_poses[self.poses.shape[0]:, 6] = 1.0
-        self.poses = new_poses
+    def _grow(self) -> None:
+        """Room for more keyframes: a larger tensor per field, the old rows copied in, the rest filled."""
+        old, new = self.capacity, grown_capacity(self.capacity)
+
+        def grown(t: Tensor, fill: float) -> Tensor:
+            out = t.new_empty((new, *t.shape[1:]))
+            out[:old].copy_(t)
+            out[old:].fill_(fill)
+            return out
+
+        poses = grown(self.poses, 0.0)
+        poses[old:, 6] = 1.0
+        self.poses = poses
         self.disps = grown(self.disps, 1.0)
         if self.depth_prior is not None:
             self.depth_prior = grown(self.depth_prior, 0.0)
@@ -114,24 +139,41 @@ class KeyframeBuffer:
         """Keyframe k's RGB thumbnail (decoded; JPEG at quality THUMBNAIL_QUALITY)."""
         return decode_rgb(self.thumbnails[k])
 
-    def thumbnail_stack(self) -> np.ndarray:
-        """(K, H/s, W/s, 3) uint8: every thumbnail, decoded into one array."""
-        if not self.count:
-            return np.zeros((0, 1, 1, 3), np.uint8)
-        out = np.empty((self.count, *self._thumb_shape), np.uint8)
-        for k in range(self.count):
-            out[k] = self.thumbnail(k)
-        return out
+    def thumbnail_stack(self) -> JpegStack:
+        """(K, H/s, W/s, 3) uint8: every thumbnail, still encoded (``np.asarray`` decodes them all)."""
+        return JpegStack(self.thumbnails[:self.count], self._thumb_shape)
 
-    def feature_block(self, lo: int, hi: int) -> Tensor:
-        """Features (hi − lo, C, h, w) of keyframes [lo, hi), none of them archived."""
+    def feature_block(self, lo: int, hi: int, dtype: torch.dtype | None = None,
+                      channels_last: bool = False) -> Tensor:
+        """Features (hi − lo, C, h, w) of keyframes [lo, hi), none of them archived.
+
+        ``dtype`` (default: the stored one) converts each keyframe straight into the
+        result, without a stacked copy in the stored dtype on the way (200 keyframes
+        of 64 × 48 × 64 float16 are 78 MB).  ``channels_last`` lays the result out as
+        (N, H, W, C) in memory, converted one keyframe at a time as the CPU backend's
+        feature table does (a converting transpose is several times slower).
+        """
         block = self.features[lo:hi]
         if any(f is None for f in block):
             raise ValueError(f"keyframes in [{lo}, {hi}) were archived: their features are gone")
         for k, f in enumerate(block):
             if not isinstance(f, Tensor):  # pending: fetch them once
                 block[k] = self.features[lo + k] = self._stored(f.result())
-        return torch.stack(block)
+        dtype = self.feature_dtype if dtype is None else dtype
+        if not block or (dtype == self.feature_dtype and not channels_last):
+            return torch.stack(block)
+        c, h, w = block[0].shape
+        if not channels_last:
+            out = torch.empty((len(block), c, h, w), dtype=dtype, device=self.device)
+            for row, f in zip(out, block):
+                row.copy_(f)
+            return out
+        rows = torch.empty(len(block), h * w, c, dtype=dtype, device=self.device)
+        frame = torch.empty(c, h * w, dtype=dtype, device=self.device)
+        for row, f in zip(rows, block):
+            frame.copy_(f.reshape(c, h * w))
+            row.copy_(frame.t())
+        return rows.view(len(block), h, w, c).permute(0, 3, 1, 2)
 
     def _stored(self, features: Tensor) -> Tensor:
         return features.to(device=self.device, dtype=self.feature_dtype)

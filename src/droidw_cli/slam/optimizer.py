@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+import torch
 from torch import Tensor
 
 from droidw_cli.ba.interface import BABackend
@@ -30,14 +31,24 @@ class SharedState:
     iterations: int = 0
 
 
-def window_state(buffer: KeyframeBuffer, lo: int, hi: int, shared: SharedState, with_features: bool) -> BAState:
+def window_state(buffer: KeyframeBuffer, lo: int, hi: int, shared: SharedState, with_features: bool,
+                 feature_layout: str = "stored") -> BAState:
     """A :class:`BAState` for keyframes [lo, hi) of the buffer.
 
     Poses, disparities and the prior are copies; the features are the buffer's
-    float16 maps stacked, which the backends only read (they convert them to
-    float32 as they need, once per window).
+    float16 maps stacked (``feature_layout`` "stored"), which the backends only
+    read, or converted to float32 channels-last ("float32_channels_last", see
+    :attr:`BABackend.feature_layout`), the same values in the layout the CPU
+    backend computes on, so that it keeps no second copy of them.
     """
-    feats = buffer.feature_block(lo, hi) if (with_features and buffer.features is not None) else None
+    feats = None
+    if with_features and buffer.features is not None:
+        if feature_layout == "float32_channels_last":
+            feats = buffer.feature_block(lo, hi, torch.float32, channels_last=True)
+        elif feature_layout == "stored":
+            feats = buffer.feature_block(lo, hi)
+        else:
+            raise ValueError(f"unknown feature layout {feature_layout!r}")
     return BAState(
         poses=buffer.poses[lo:hi].clone(),
         disps=buffer.disps[lo:hi].clone(),
@@ -56,7 +67,7 @@ def run_window(backend: BABackend, buffer: KeyframeBuffer, lo: int, hi: int, edg
     """
     unc = params.uncertainty
     use_unc = unc.enable and buffer.features is not None and shared.theta is not None
-    state = window_state(buffer, lo, hi, shared, use_unc)
+    state = window_state(buffer, lo, hi, shared, use_unc, getattr(backend, "feature_layout", "stored"))
     cost = float("nan")
     for _ in range(iters):
         weighted = use_unc and shared.iterations >= unc.warmup_iters

@@ -29,6 +29,7 @@ from droidw_cli.errors import InputError
 from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics, unscale_intrinsics
 from droidw_cli.io.calibration import Calibration
 from droidw_cli.io.frames import FrameSource
+from droidw_cli.io.jpeg import JpegStack
 from droidw_cli.io.prefetch import prefetched
 from droidw_cli.io.prepare import FramePreparer
 from droidw_cli.slam.backend import GlobalBackend
@@ -51,13 +52,13 @@ class TrackResult:
     kf_index: np.ndarray  # (K,) frame positions of keyframes
     kf_timestamps: np.ndarray
     kf_poses_c2w: np.ndarray  # (K, 4, 4)
-    kf_disps: np.ndarray  # (K, h, w)
-    kf_images: np.ndarray  # (K, H/s, W/s, 3) thumbnails
-    kf_uncertainty: np.ndarray | None  # (K, h, w)
+    kf_disps: np.ndarray  # (K, h, w) float32
+    kf_images: JpegStack  # (K, H/s, W/s, 3) uint8 thumbnails, JPEG-encoded until read (np.asarray decodes all)
+    kf_uncertainty: np.ndarray | None  # (K, h, w) float32
     kf_features: np.ndarray | None  # (K, C, h, w) float16
-    kf_confidence: np.ndarray  # (K, h, w) mean edge confidence of each pixel
+    kf_confidence: np.ndarray  # (K, h, w) float16 mean edge confidence of each pixel (stored as float16 too)
     kf_dynamic: np.ndarray | None  # (K, h, w) bool: every pixel ever masked dynamic (None: dynamics.mode none)
-    kf_object_ids: np.ndarray | None  # (K, h, w) int32 object id, −1 none
+    kf_object_ids: np.ndarray | None  # (K, h, w) int16 object id, −1 none (int32 past 32767 ids)
     objects: np.ndarray | None  # (M, 8) keyframe, id, centre x, y (input px), world centroid x, y, z, area
     theta: np.ndarray | None
     initialised: bool
@@ -107,6 +108,19 @@ def _dynamic_record(fe: Frontend, preparer: FramePreparer) -> DynamicRecord | No
         work = (table[:, col] + 0.5) * BA_SCALE - 0.5
         table[:, col] = (work + off + 0.5) / scale - 0.5
     return DynamicRecord(rec.masks, rec.ids, table)
+
+
+def _confidence_half(fe: Frontend, chunk: int = 256) -> np.ndarray:
+    """:meth:`Frontend.confidence` of every keyframe as float16, computed ``chunk`` keyframes at a time.
+
+    keyframes.npz stores it as float16 anyway, and the archived keyframes keep
+    it as float16; a float32 copy of all of them is 12 KB a keyframe.
+    """
+    n = len(fe.buffer)
+    out = np.empty((n, *fe.buffer.grid), np.float16)
+    for lo in range(0, n, chunk):
+        out[lo:lo + chunk] = fe.confidence(lo, min(n, lo + chunk)).to(torch.float16).cpu().numpy()
+    return out
 
 
 def torch_threads(requested: int) -> int:
@@ -231,6 +245,7 @@ class Tracker:
                 )
             with timer("global_ba"):
                 gba.finish()
+            self.backend.release()  # the last BA has run: its cached window features are dead weight
             with timer("dynamics"):
                 dyn = _dynamic_record(fe, preparer)
 
@@ -259,11 +274,11 @@ class Tracker:
             kf_index=np.array(buf.frame_index, dtype=np.int64),
             kf_timestamps=np.array(buf.timestamps, dtype=np.float64),
             kf_poses_c2w=to_matrix(invert(buf.poses[:n_kf].cpu())) if n_kf else np.zeros((0, 4, 4)),
-            kf_disps=buf.disps[:n_kf].cpu().numpy().copy(),
+            kf_disps=buf.disps[:n_kf].cpu().numpy(),  # on the host a view: the buffer is not used any more
             kf_images=buf.thumbnail_stack(),
             kf_uncertainty=None if unc is None else unc.cpu().numpy(),
             kf_features=feats_np,
-            kf_confidence=fe.confidence().cpu().numpy(),
+            kf_confidence=_confidence_half(fe),
             kf_dynamic=None if dyn is None else dyn.masks,
             kf_object_ids=None if dyn is None else dyn.ids,
             objects=None if dyn is None else dyn.table,
