@@ -114,8 +114,8 @@ class _Frame:
     def n(self) -> int:
         return len(self.areas)
 
-    def overlap(self, pred: np.ndarray, fit: np.ndarray) -> np.ndarray:
-        """(n,) |pred ∩ fit ∩ C_c| and the claims (n,) bool of a predicted mask (step 2)."""
+    def overlap(self, pred: np.ndarray, fit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Step 2 for a predicted mask: o_c = |pred ∩ fit ∩ C_c| and the score o_c / min(|pred|, |C_c|), (n,) each."""
         o = np.bincount(self.labels[pred & fit], minlength=self.n + 1)[1:].astype(np.float64)
         return o, o / np.maximum(np.minimum(pred.sum(), self.areas), 1)
 
