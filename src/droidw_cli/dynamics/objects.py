@@ -7,10 +7,15 @@ After the global BA (:func:`finish`):
    zeroed; they are conservative (the epipolar ones are grown by
    ``epipolar_dilate`` cells and cover about three times the movers: mask IoU
    0.24-0.35 on the synthetic presets), so with scene consistency on, M_k is
-   the consistency mask of keyframe k under the final poses, against up to
-   ``consistency_sources`` keyframes on *each* side (the online check only had
-   predecessors), joined with its last in-loop consistency mask.  Without
-   scene consistency M_k is the in-loop record (the epipolar masks).
+   the union of the consistency masks of keyframe k under the final poses
+   against up to ``consistency_sources`` keyframes before it and, separately,
+   against as many after it (the online check only had predecessors), and its
+   last in-loop consistency mask.  Each side on its own, because a mover
+   that overlaps its own earlier position is often flagged by one side only,
+   and the views' "at least half" rule of one test over both sides then
+   drops it (mask IoU 0.69 against 0.76 on rotate, 0.80 against 0.84 on
+   stopgo, the same precision).  Without scene consistency M_k is the in-loop
+   record (the epipolar masks).
 2. Object ids (:class:`~droidw_cli.dynamics.tracker.DynamicObjectTracker`:
    association by the overlap of predicted masks, ADD-SLAM's rules for weak
    matches) over the keyframes in order.  Keyframes lie several frames apart,
@@ -154,8 +159,9 @@ def final_pass(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intri
                cfg: DynamicsConfig) -> list[Tensor]:
     """Step 1: the output dynamic mask of every keyframe, (h, w) bool each.
 
-    With scene consistency on: the consistency mask under the final poses, both sides, joined with
-    the keyframe's last in-loop consistency mask.  Without it: the in-loop record (epipolar masks).
+    With scene consistency on: the union of the consistency masks under the final poses against the
+    keyframes before and against those after (each side tested on its own) and the keyframe's last
+    in-loop consistency mask.  Without it: the in-loop record (epipolar masks).
     """
     n = len(masks)
     if not masks.consistency:
@@ -165,9 +171,12 @@ def final_pass(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intri
     m = cfg.consistency_sources
     out = []
     for k in range(n):
-        sources = [j for j in range(k - m, k + m + 1) if j != k and 0 <= j < n]
-        objects = masks.detect(k, g, d, intrinsics, sources)
-        out.append(masks.current[k].clone() if objects is None else objects.mask.cpu() | masks.current[k])
+        mask = masks.current[k].clone()
+        for sources in (list(range(max(0, k - m), k)), list(range(k + 1, min(n, k + 1 + m)))):
+            objects = masks.detect(k, g, d, intrinsics, sources)
+            if objects is not None:
+                mask |= objects.mask.cpu()
+        out.append(mask)
     return out
 
 
