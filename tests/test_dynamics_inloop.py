@@ -68,7 +68,7 @@ def test_objects_keep_their_id_and_are_propagated_from_the_previous_centre():
         masks.append(_image(BLOCK))
         disps[k][BLOCK] = 1.0
         if k != 2:
-            masks.record(k, truth)
+            masks.set_current(k, truth)  # the in-loop consistency mask
     poses = _poses(4, step=0.0)  # a still camera and a still block: nothing is inconsistent
     rec = finish(masks, poses, disps, K8, cfg)
     assert rec.masks[2][BLOCK].all()  # propagated
@@ -88,9 +88,34 @@ def test_no_propagation_onto_background_that_does_not_look_like_the_object():
     disps[0][BLOCK] = 1.0
     masks.append(_image(BLOCK))
     masks.append(_image(None))  # the object left: only the wall at its old centre
-    masks.record(0, truth)
+    masks.set_current(0, truth)
     rec = finish(masks, _poses(2, step=0.0), disps, K8, cfg)
     assert not rec.masks[1].any()
+
+
+def test_the_output_mask_leaves_the_in_loop_epipolar_masks_out_only_with_consistency_on():
+    """With consistency on, the output is the final consistency mask ∪ the last in-loop one, not the
+    dilated epipolar record; without it, the record is all there is."""
+    truth = torch.zeros(H, W, dtype=torch.bool)
+    truth[BLOCK] = True
+    halo = torch.zeros(H, W, dtype=torch.bool)
+    halo[4:20, 8:24] = True  # an epipolar mask grown around the block
+    disps = torch.full((3, H, W), 0.5)
+    outputs = {}
+    for mode, on in (("both", True), ("epipolar", False)):
+        cfg = DynamicsConfig(mode=mode)
+        masks = KeyframeMasks(cfg, (H, W), consistency=on)
+        for k in range(3):
+            masks.append(_image(BLOCK))
+            disps[k][BLOCK] = 1.0
+            masks.record(k, halo)
+        if on:
+            masks.set_current(1, truth)
+        outputs[mode] = finish(masks, _poses(3, step=0.0), disps, K8, cfg).masks
+        assert masks.masks[1].sum() == halo.sum()  # the in-loop record itself is left as it was
+    assert (outputs["both"][1] == truth.numpy()).all()
+    assert not outputs["both"][0][~truth.numpy()].any()  # no halo anywhere
+    assert all((outputs["epipolar"][k] == halo.numpy()).all() for k in range(3))
 
 
 def test_dynamics_mode_is_validated_and_settable():

@@ -1,4 +1,4 @@
-"""DynamicObjectTracker: ids across frames and the three track-ending rules."""
+"""DynamicObjectTracker: ids by mask overlap, splits and merges, re-identification, the weak-match rules."""
 
 from __future__ import annotations
 
@@ -6,14 +6,25 @@ import numpy as np
 import torch
 
 from droidw_cli.dynamics import DynamicObjectTracker
+from droidw_cli.dynamics.association import depth_components, shift_mask
 
 H, W = 60, 100
 
 
 def _box(x0: int, y0: int, sw: int, sh: int) -> np.ndarray:
     m = np.zeros((H, W), bool)
-    m[y0:y0 + sh, x0:x0 + sw] = True
+    m[max(0, y0):y0 + sh, max(0, x0):x0 + sw] = True
     return m
+
+
+def _ids_by_box(objs, boxes: dict[str, np.ndarray]) -> dict[str, int]:
+    """The id covering most of each named box."""
+    out = {}
+    for name, box in boxes.items():
+        best = max(objs, key=lambda o: int((o.mask & box).sum()))
+        assert (best.mask & box).sum() > 0.5 * box.sum(), name
+        out[name] = best.id
+    return out
 
 
 def test_id_is_kept_while_object_moves():
@@ -39,37 +50,164 @@ def test_two_objects_keep_their_own_ids():
         assert o.id == side[o.centre[0] < W / 2]
 
 
-def test_area_jump_ends_track_and_starts_a_new_one():
+def test_an_overlapping_object_keeps_its_id_when_it_grows():
+    """ADD-SLAM ends a track on a 1.5× area jump; a mask that overlaps the prediction is trusted."""
     tr = DynamicObjectTracker()
     (a,) = tr.update(_box(30, 20, 10, 10))
-    (b,) = tr.update(_box(31, 20, 10, 14))  # 1.4× — still the same track
-    assert b.id == a.id
-    (c,) = tr.update(_box(31, 18, 14, 18))  # 252 / 140 = 1.8×
-    assert c.id != a.id
-    assert [(e.id, e.reason) for e in tr.ended] == [(a.id, "growth")]
+    (b,) = tr.update(_box(31, 18, 14, 18))  # 252 / 100 = 2.5×, but it contains the old box
+    assert b.id == a.id and tr.ended == []
 
 
-def test_border_ends_track():
+def test_a_weak_match_obeys_the_area_and_jump_rules():
+    """No overlap: the nearest component is taken only within 1.5× the area and 20 % of the width."""
     tr = DynamicObjectTracker()
-    (a,) = tr.update(_box(20, 25, 8, 8))
-    (b,) = tr.update(_box(8, 25, 8, 8))
+    (a,) = tr.update(_box(30, 20, 10, 10))
+    (b,) = tr.update(_box(42, 20, 11, 11))  # no overlap, 12 px away, 1.2×: the same object
     assert b.id == a.id
-    assert tr.update(_box(0, 25, 6, 8)) == []  # centre x = 2.5 < 4 % of 100
-    assert [(e.id, e.reason) for e in tr.ended] == [(a.id, "border")]
-    assert tr.update(_box(0, 25, 6, 8)) == []  # objects at the border start no tracks
-
-
-def test_lost_object_ends_track():
+    (c,) = tr.update(_box(55, 20, 11, 18))  # no overlap, 1.6× the area: a new object
+    assert c.id != a.id
     tr = DynamicObjectTracker()
     (a,) = tr.update(_box(10, 20, 10, 10))
-    (b,) = tr.update(_box(40, 20, 10, 10))  # centre moves 30 px > 20 % of 100 and is not inside: no match
-    assert b.id != a.id and [(e.id, e.reason) for e in tr.ended] == [(a.id, "lost")]
-    assert tr.update(np.zeros((H, W), bool)) == [] and tr.ended[-1].reason == "lost"
+    (b,) = tr.update(_box(40, 20, 10, 10))  # 30 px > 20 % of 100, and no overlap: a new object
+    assert b.id != a.id
 
 
-def test_centre_jump_ends_track():
-    tr = DynamicObjectTracker(max_growth=100.0)
-    (d,) = tr.update(_box(10, 10, 60, 5) | _box(10, 10, 5, 40))  # an L: its centre sits at its left end
-    # the old centre is still inside the new blob, but the blob's centre is now in the wide right leg (> 20 px away)
-    (e,) = tr.update(_box(10, 10, 60, 5) | _box(62, 10, 8, 40))
-    assert e.id != d.id and [(x.id, x.reason) for x in tr.ended] == [(d.id, "jump")]
+def test_a_blob_missing_for_one_frame_gets_its_id_back():
+    tr = DynamicObjectTracker()
+    (a,) = tr.update(_box(20, 20, 12, 12))
+    (b,) = tr.update(_box(24, 20, 12, 12))
+    assert b.id == a.id
+    assert tr.update(np.zeros((H, W), bool)) == []  # missed: dormant, not ended
+    assert tr.ended == [] and a.id in tr.dormant
+    (c,) = tr.update(_box(32, 20, 12, 12), predicted={a.id: (37.5, 25.5)})
+    assert c.id == a.id and a.id in tr.active
+
+
+def test_a_blob_missing_for_longer_is_lost():
+    tr = DynamicObjectTracker(max_missed=2)
+    (a,) = tr.update(_box(20, 20, 12, 12))
+    for _ in range(2):
+        assert tr.update(np.zeros((H, W), bool)) == [] and tr.ended == []
+    assert tr.update(np.zeros((H, W), bool)) == []
+    assert [(e.id, e.reason) for e in tr.ended] == [(a.id, "lost")]
+    (b,) = tr.update(_box(20, 20, 12, 12))
+    assert b.id != a.id
+
+
+def test_a_blob_leaving_and_reentering_gets_a_new_id_but_keeps_it_at_the_border():
+    tr = DynamicObjectTracker()
+    (a,) = tr.update(_box(20, 25, 12, 12))
+    (b,) = tr.update(_box(6, 25, 12, 12), predicted={a.id: (11.5, 30.5)})
+    (c,) = tr.update(_box(-6, 25, 12, 12), predicted={a.id: (-0.5, 30.5)})  # half out, centre x = 2.5 at the border
+    assert a.id == b.id == c.id  # still in view: ADD-SLAM would end the track here
+    # the prediction leaves the image: the track ends
+    assert tr.update(np.zeros((H, W), bool), predicted={a.id: (-20.0, 30.5)}) == []
+    assert [(e.id, e.reason) for e in tr.ended] == [(a.id, "left")]
+    assert tr.update(_box(0, 25, 4, 12)) == []  # a blob at the border starts no track
+    (d,) = tr.update(_box(4, 25, 12, 12))  # back in view: a new id
+    assert d.id != a.id
+
+
+def test_two_blobs_crossing_at_different_depths_keep_their_ids():
+    """A near blob passes in front of a far one; they merge into one component while crossing."""
+    tr = DynamicObjectTracker()
+    ids = None
+    for k in range(9):
+        xa, xb = 10 + 7 * k, 66 - 7 * k  # a moves right at 1 m, b moves left at 2 m
+        near, far = _box(xa, 20, 12, 16), _box(xb, 22, 10, 12)
+        depth = np.full((H, W), 4.0)
+        depth[far] = 2.0
+        depth[near] = 1.0
+        mask = near | far
+        live = tr.live()
+        predicted = {t: (o.centre[0] + (7 if o.depth < 1.5 else -7), o.centre[1]) for t, o in live.items()}
+        objs = tr.update(mask, predicted, depth)
+        got = _ids_by_box(objs, {"near": near, "far": far & ~near} if (far & ~near).sum() > 20 else {"near": near})
+        if ids is None:
+            ids = got
+        for name, tid in got.items():
+            assert tid == ids[name], (k, name)
+    assert len(ids) == 2 and ids["near"] != ids["far"]
+
+
+def test_two_blobs_crossing_at_the_same_depth_keep_their_ids_by_their_predicted_motion():
+    tr = DynamicObjectTracker()
+    ids = None
+    for k in range(9):
+        xa, xb = 14 + 7 * k, 70 - 7 * k
+        a, b = _box(xa, 20, 12, 16), _box(xb, 21, 12, 16)
+        image = np.full((H, W, 3), 0.5)
+        image[b] = (0.1, 0.2, 0.9)
+        image[a] = (0.9, 0.2, 0.1)  # a in front
+        predicted = {t: (o.centre[0] + (7 if o.centre[0] < 40 + 7 * k - 21 else -7), o.centre[1])
+                     for t, o in tr.live().items()} if ids else None
+        objs = tr.update(a | b, predicted, image=image)
+        visible = {"a": a} | ({"b": b & ~a} if (b & ~a).sum() > 40 else {})
+        got = _ids_by_box(objs, visible)
+        if ids is None:
+            ids = got
+        for name, tid in got.items():
+            assert tid == ids[name], (k, name)
+    assert ids["a"] != ids["b"]
+
+
+def test_where_both_predictions_cover_a_merged_blob_colour_splits_it():
+    """Red a (in front) and blue b, both predicted onto the overlap: the colour decides, not the larger overlap."""
+    image = np.full((H, W, 3), 0.5)
+    a0, b0 = _box(10, 20, 12, 16), _box(60, 18, 12, 20)
+    image[a0], image[b0] = (0.9, 0.2, 0.1), (0.1, 0.2, 0.9)
+    tr = DynamicObjectTracker()
+    first = _ids_by_box(tr.update(a0 | b0, image=image), {"a": a0, "b": b0})
+    a1, b1 = _box(32, 20, 12, 16), _box(38, 18, 12, 20)
+    image = np.full((H, W, 3), 0.5)
+    image[b1] = (0.1, 0.2, 0.9)
+    image[a1] = (0.9, 0.2, 0.1)
+    predicted = {first["a"]: (37.5, 27.5), first["b"]: (43.5, 27.5)}  # b's larger mask overlaps the blob more
+    objs = tr.update(a1 | b1, predicted, image=image)
+    assert _ids_by_box(objs, {"a": a1, "b": b1 & ~a1}) == first
+    obj_a = next(o for o in objs if o.id == first["a"])
+    assert (obj_a.mask & a1).sum() >= 0.8 * a1.sum()
+
+
+def test_a_mostly_hidden_object_keeps_its_id_and_its_model():
+    tr = DynamicObjectTracker()
+    (a,) = tr.update(_box(20, 20, 12, 12))
+    (b,) = tr.update(_box(20, 20, 4, 12))  # a third of it left
+    assert b.id == a.id and b.occluded and tr.active[a.id].area == 144
+    (c,) = tr.update(_box(21, 20, 12, 12))
+    assert c.id == a.id and not c.occluded
+
+
+def test_a_large_jump_is_reidentified_by_colour_only_when_the_colour_matches():
+    image = np.full((H, W, 3), 0.5)
+    for colour, same in (((0.9, 0.2, 0.1), True), ((0.1, 0.2, 0.9), False)):
+        tr = DynamicObjectTracker()
+        first, second = _box(10, 20, 12, 14), _box(50, 22, 12, 14)  # 40 px: beyond any centre rule
+        im1, im2 = image.copy(), image.copy()
+        im1[first] = (0.9, 0.2, 0.1)
+        im2[second] = colour
+        (a,) = tr.update(first, image=im1)
+        (b,) = tr.update(second, image=im2)
+        assert (b.id == a.id) == same
+
+
+def test_depth_components_cut_at_depth_steps():
+    mask = _box(10, 10, 20, 10)
+    depth = np.full((H, W), 2.0)
+    depth[:, 20:] = 3.0  # a step of log 1.5 = 0.41 inside the box
+    labels = depth_components(mask, depth, 0.15)
+    assert set(np.unique(labels[mask])) == {1, 2}
+    assert len(np.unique(labels[mask & (depth == 2.0)])) == 1
+    assert len(np.unique(depth_components(mask, None, 0.15)[mask])) == 1
+    # a gentle slope is no step
+    slope = 2.0 + 0.01 * np.arange(W)[None, :].repeat(H, 0)
+    assert len(np.unique(depth_components(mask, slope, 0.15)[mask])) == 1
+    objs = DynamicObjectTracker().update(mask, depth=depth)
+    assert len(objs) == 2
+
+
+def test_shift_mask_drops_what_leaves_the_image():
+    m = _box(0, 0, 4, 4)
+    assert shift_mask(m, 2, 1).sum() == 16 and shift_mask(m, 2, 1)[1:5, 2:6].all()
+    assert shift_mask(m, -2, 0).sum() == 8
+    assert not shift_mask(m, -W, 0).any()

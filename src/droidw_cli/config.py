@@ -214,10 +214,11 @@ class DynamicsConfig:
       the ``segmenter`` plugin (``grow``: the built-in region grower).
     * ``both``: the union; ``none``: no masks.
 
-    Object tracks (ids across keyframes) end when the centre comes within
-    ``track_border`` of the image border, the area grows more than
-    ``track_growth``× or the centre jumps more than ``track_jump`` of the width
-    between keyframes (ADD-SLAM's rules).
+    Object ids across keyframes follow the overlap of each object's predicted
+    mask (:mod:`droidw_cli.dynamics.tracker`); ADD-SLAM's rules guard the weak
+    matches by centre alone (area growth at most ``track_growth``×, centre jump
+    at most ``track_jump`` of the width), and no new object starts within
+    ``track_border`` of the image border.
     """
 
     mode: str = "epipolar"

@@ -100,7 +100,7 @@ def _dynamic_record(fe: Frontend, preparer: FramePreparer) -> DynamicRecord | No
     buf = fe.buffer
     n = len(buf)
     disps = observed_disparity(buf.disps[:n], buf.depth_prior[:n] if buf.has_prior else None)
-    rec = finish(fe.masks, buf.poses[:n], disps, fe.shared.intrinsics, fe.cfg.dynamics)
+    rec = finish(fe.masks, buf.poses[:n], disps, fe.shared.intrinsics, fe.cfg.dynamics, sensor_depth=buf.has_prior)
     (sh, sw), (rh, rw) = preparer.src_size, preparer.resized_size
     oy, ox = preparer.offset
     table = rec.table.copy()

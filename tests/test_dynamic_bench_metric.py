@@ -1,0 +1,54 @@
+"""benchmarks/dynamic_bench.py: the id-switch metrics (issue 11: "at most one id switch per object
+per sequence while it stays in view")."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+_spec = importlib.util.spec_from_file_location(
+    "dynamic_bench", Path(__file__).resolve().parents[1] / "benchmarks" / "dynamic_bench.py")
+bench = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(bench)
+
+H, W = 20, 20  # 400 cells: "in view" is at least 2 cells (0.5 %)
+
+
+def _walker(cells_per_frame: list[int]) -> np.ndarray:
+    """(K, H, W) masks covering the given number of cells (a row from the top-left)."""
+    out = np.zeros((len(cells_per_frame), H, W), bool)
+    for k, n in enumerate(cells_per_frame):
+        out[k].reshape(-1)[:n] = True
+    return out
+
+
+def test_switches_count_only_while_the_walker_stays_in_view():
+    inst = _walker([30, 30, 30, 0, 30, 30])[None]  # visible, gone for a keyframe, back
+    ids = np.full(inst.shape[1:], -1, np.int32)
+    for k, i in enumerate([0, 0, 1, -1, 2, 2]):
+        ids[k][inst[0, k]] = i
+    assert bench.id_switches_any(inst, ids) == 2  # 0→1 and 1→2
+    assert bench.id_switches(inst, ids) == 1  # 1→2 came after it left the view
+
+
+def test_a_walker_covering_a_cell_is_out_of_view_and_keyframes_without_an_id_are_skipped():
+    inst = _walker([30, 1, 30, 30, 30])[None]  # one cell: out of view
+    ids = np.full(inst.shape[1:], -1, np.int32)
+    for k, i in enumerate([0, 5, 1, -1, 1]):
+        ids[k][inst[0, k]] = i
+    assert bench.id_switches(inst, ids) == 0  # 0 | (out of view) | 1, no id, 1
+    assert bench.id_switches_any(inst, ids) == 2  # 0→5→1
+
+
+def test_the_worst_walker_counts_and_the_majority_id_is_the_walkers():
+    a = _walker([30, 30, 30, 30])
+    b = np.zeros_like(a)
+    b[:, 10:, :] = True
+    ids = np.full(a.shape, -1, np.int32)
+    ids[a] = 7
+    ids[:, 10:, :] = 3
+    ids[2, 10:, :3] = 9  # a few of b's pixels with another id: the majority is still 3
+    ids[1][a[1]] = 8
+    assert bench.id_switches(np.stack([a, b]), ids) == 2  # a: 7→8→7; b: none
