@@ -209,3 +209,15 @@ def test_plot_uses_evo_top_view_with_error_colours(files, capsys):
     # evo's colour bar (the jet map) puts saturated red and blue pixels in the picture
     b, g, r = (img[..., k].astype(int) for k in range(3))
     assert ((r > 200) & (g < 60) & (b < 60)).any() and ((b > 120) & (r < 40) & (g < 40)).any()
+
+
+def test_python_m_runs_the_same_command_line(tmp_path):
+    """``python -m droidw_cli`` is the ``droidw`` command: same errors, same exit codes."""
+    import subprocess
+    import sys
+
+    missing = tmp_path / "nope.txt"
+    proc = subprocess.run([sys.executable, "-m", "droidw_cli", "eval", "--gt", str(missing), "--est", str(missing)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith("droidw: error:") and "nope.txt" in proc.stderr
