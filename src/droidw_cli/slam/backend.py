@@ -140,4 +140,4 @@ class GlobalBackend:
         fixed = 1 if lo == 0 else 2
         with torch.no_grad():
             return run_window(fe.backend, fe.buffer, lo, n, edges, params, fe.shared, iters, fixed=fixed,
-                              optimize_theta=not params.uncertainty.freeze_in_global)
+                              optimize_theta=not params.uncertainty.freeze_in_global, robust_sigma=self.cfg.robust_sigma)

@@ -248,7 +248,8 @@ class Frontend:
         if params.optimize_focal != "none":
             if not (focal and focal_observable(self.buffer.poses[lo:hi], self.cfg.calib)):
                 params = self._fixed_focal
-        cost = run_window(self.backend, self.buffer, lo, hi, edges, params, self.shared, iters, fixed)
+        cost = run_window(self.backend, self.buffer, lo, hi, edges, params, self.shared, iters, fixed,
+                          robust_sigma=self.fcfg.robust_sigma)
         if params.optimize_focal != "none":
             self.shared.intrinsics = clamp_focal(self.shared.intrinsics, self._focal0, self.cfg.calib)
         return cost

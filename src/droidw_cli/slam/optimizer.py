@@ -59,10 +59,29 @@ def window_state(buffer: KeyframeBuffer, lo: int, hi: int, shared: SharedState, 
     )
 
 
+def robust_edges(backend: BABackend, state: BAState, edges: EdgeSet, sigma: float, min_depth: float) -> EdgeSet:
+    """The edges with their confidences times the Cauchy IRLS weight of their current residual.
+
+    With r = ‖p*_ij − p_ij‖ (grid px) under the state's poses and disparities,
+    the Cauchy loss ρ(r) = σ²/2 · log(1 + r²/σ²) has the IRLS weight
+    ρ'(r)/r = 1 / (1 + r²/σ²), so a Gauss-Newton step on Σ w·ρ(r) is one on
+    Σ w / (1 + r²/σ²) · r² with the factor frozen at the linearisation point.
+    Correspondences far from the rigid prediction (movers the masks missed,
+    flow that failed) lose their pull instead of bending poses quadratically.
+    """
+    coords, valid = backend.reproject(state, edges.ii, edges.jj, min_depth)
+    r2 = (edges.target - coords.to(edges.target)).square().sum(-1)
+    factor = torch.where(valid.to(r2.device), 1.0 / (1.0 + r2 / sigma ** 2), torch.ones_like(r2))
+    return EdgeSet(edges.ii, edges.jj, edges.target, edges.weight * factor.unsqueeze(-1).to(edges.weight))
+
+
 def run_window(backend: BABackend, buffer: KeyframeBuffer, lo: int, hi: int, edges: EdgeSet, params: BAParams,
-               shared: SharedState, iters: int, fixed: int, optimize_theta: bool = True) -> float:
+               shared: SharedState, iters: int, fixed: int, optimize_theta: bool = True,
+               robust_sigma: float = 0.0) -> float:
     """Optimise keyframes [lo, hi) for ``iters`` iterations; the first ``fixed`` stay put.
 
+    ``robust_sigma`` > 0 (grid px): every Gauss-Newton step reweights the edges by
+    the Cauchy loss of their current residuals (:func:`robust_edges`).
     Writes poses, disparities, intrinsics and θ back.  Returns the final cost.
     """
     unc = params.uncertainty
@@ -76,7 +95,8 @@ def run_window(backend: BABackend, buffer: KeyframeBuffer, lo: int, hi: int, edg
         if weighted and optimize_theta:
             state = state.with_(theta=backend.uncertainty_step(state, edges, params).theta)
         step_params = dataclasses.replace(params, t0=fixed, uncertainty=dataclasses.replace(unc, enable=weighted))
-        result = backend.ba_step(state, edges, step_params)
+        step_edges = robust_edges(backend, state, edges, robust_sigma, params.min_depth) if robust_sigma > 0 else edges
+        result = backend.ba_step(state, step_edges, step_params)
         state, cost = result.state, result.cost
         shared.iterations += 1
     buffer.poses[lo:hi] = state.poses
