@@ -34,7 +34,7 @@ from droidw_cli.io.prefetch import prefetched
 from droidw_cli.io.prepare import FramePreparer
 from droidw_cli.slam.backend import GlobalBackend
 from droidw_cli.slam.filler import TrajectoryFiller
-from droidw_cli.slam.frontend import Frontend
+from droidw_cli.slam.frontend import Frontend, grid_disparity
 from droidw_cli.slam.motion_filter import MotionFilter
 from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.timing import StageTimer, Timed
@@ -162,8 +162,7 @@ class Tracker:
                 feats = None if self.features is None else _Pending(pool.submit(self._extract, image), timer)
                 prior = None
                 if cfg.io.use_depth and depth is not None:
-                    d8 = cv2.resize(depth, (grid[1], grid[0]), interpolation=cv2.INTER_NEAREST)
-                    prior = torch.from_numpy(np.where(d8 > 0.1, 1.0 / np.maximum(d8, 1e-6), 0.0).astype(np.float32))
+                    prior = grid_disparity(depth, grid)
                 thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
                 k = fe.add_keyframe(frame.index, frame.timestamp, image, thumb, feats, prior)
                 with timer("global_ba"):
