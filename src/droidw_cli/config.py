@@ -141,6 +141,7 @@ class FrontendConfig:
     iters1: int = 3
     iters2: int = 2
     velocity_damping: float = 0.5
+    proximity_stride: int = 2  # the proximity candidates' frame distance averages every s-th grid pixel (s² cheaper)
     robust_sigma: float = 1.0  # grid px: Cauchy reweighting of the window BA's residuals (0 = off); rotate 2.82 → 1.07 cm with backend.robust_sigma 0.5
 
     def __post_init__(self) -> None:

@@ -277,13 +277,14 @@ class Frontend:
             self.shared.intrinsics = clamp_focal(self.shared.intrinsics, self._focal0, self.cfg.calib)
         return cost
 
-    def distance(self, ii: list[int], jj: list[int]) -> torch.Tensor:
-        """Frame distances d(i, j) in grid px under the current poses and disparities."""
+    def distance(self, ii: list[int], jj: list[int], stride: int = 1) -> torch.Tensor:
+        """Frame distances d(i, j) in grid px under the current poses and disparities (every
+        ``stride``-th grid pixel, :func:`~droidw_cli.slam.distance.frame_distance`)."""
         buf = self.buffer
         return frame_distance(buf.poses[:len(buf)], buf.disps[:len(buf)], self.shared.intrinsics,
                               torch.tensor(ii, dtype=torch.long, device=buf.device),
                               torch.tensor(jj, dtype=torch.long, device=buf.device),
-                              self.fcfg.beta, self.params.min_depth)
+                              self.fcfg.beta, self.params.min_depth, stride=stride)
 
     # ------------------------------------------------------------------ public
     def add_keyframe(self, frame_index: int, timestamp: float, image: np.ndarray, thumbnail: np.ndarray,
@@ -341,7 +342,7 @@ class Frontend:
                 for j in range(lo, i - f.radius) if (i, j) not in self.cache]
         if not cand:
             return []
-        dist = self.distance([i for i, _ in cand], [j for _, j in cand])
+        dist = self.distance([i for i, _ in cand], [j for _, j in cand], f.proximity_stride)
         existing = {p for p in self.cache.pairs() if min(p) >= lo}
         return graph.select_proximity(cand, dist, f.flow_thresh, f.nms, existing, f.proximity_max)
 
