@@ -38,6 +38,8 @@ from droidw_cli.dynamics.warp import predict_views
 
 #: a consistency mask over this share of the view is taken for a failed prediction and dropped
 MAX_MASKED = 0.5
+#: the grid flow of edges i → j with |i − j| up to this is kept for the final masks
+EDGE_SPAN = 2
 
 
 class PackedMasks:
@@ -113,6 +115,13 @@ class KeyframeMasks:
         self.masks = PackedMasks(grid)  # union of every mask ever given (the map leaves these out)
         self.current = PackedMasks(grid)  # the latest consistency mask (BA zeroes these)
         self.times: list[float] = []  # keyframe timestamps (object motion over time)
+        # per keyframe the epipolar motion score max_j d_j / τ_j over its edges so far, undilated
+        # (epipolar.moving_score; float16, 6 KB at 48 × 64): the monocular output masks start from it
+        self.scores: list[np.ndarray] = []
+        # grid flow of the short edges (|i − j| ≤ EDGE_SPAN): (i, j) → (target p*_ij (h, w, 2) float16 in grid
+        # px of j, confidence (h, w) uint8 in 1/255); 15 KB an edge, about 60 KB a keyframe.  The monocular
+        # output masks test it against the final poses (dynamics/posthoc.py)
+        self.edges: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
     def __len__(self) -> int:
         return len(self.masks)
@@ -123,6 +132,7 @@ class KeyframeMasks:
         self.times.append(float(len(self.times) if timestamp is None else timestamp))
         self.masks.append(np.zeros(self.grid, dtype=bool))
         self.current.append(np.zeros(self.grid, dtype=bool))
+        self.scores.append(np.zeros(self.grid, dtype=np.float16))
 
     def image(self, k: int) -> Tensor:
         """Keyframe k's colour on the grid, (h, w, 3) float32 in [0, 1]."""
@@ -136,10 +146,29 @@ class KeyframeMasks:
         del self.masks[k]
         del self.current[k]
         del self.times[k]
+        del self.scores[k]
+
+        def renumber(i: int) -> int:
+            return i - (i > k)
+
+        self.edges = {(renumber(a), renumber(b)): v for (a, b), v in self.edges.items() if k not in (a, b)}
 
     def record(self, k: int, mask: Tensor | np.ndarray) -> None:
         """Add ``mask`` (h, w) to keyframe k's union of dynamic masks."""
         self.masks[k] |= torch.as_tensor(np.asarray(mask, dtype=bool))
+
+    def keep_edge(self, i: int, j: int, target: Tensor, weight: Tensor) -> None:
+        """Keep the grid flow of edge i → j when it is short (``EDGE_SPAN``); target (h, w, 2), weight (h, w[, 2])."""
+        if abs(i - j) > EDGE_SPAN:
+            return
+        w = weight.detach().cpu().float()
+        w = w[..., 0] if w.dim() == 3 else w
+        self.edges[(i, j)] = (target.detach().cpu().numpy().astype(np.float16),
+                              np.round(w.clamp(0, 1).numpy() * 255).astype(np.uint8))
+
+    def record_score(self, k: int, score: np.ndarray) -> None:
+        """Keyframe k's epipolar motion score is now at least ``score`` (h, w) (the max over its edges)."""
+        self.scores[k] = np.maximum(self.scores[k], np.asarray(score, dtype=np.float16))
 
     def set_current(self, k: int, mask: Tensor | None) -> None:
         """Keyframe k's consistency mask for BA is now ``mask`` (None: no mask); it also joins the record."""

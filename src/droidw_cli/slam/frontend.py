@@ -55,7 +55,7 @@ from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.ba.params import BAParams
 from droidw_cli.config import TrackConfig
 from droidw_cli.correspondence.base import Correspondence, MatchCall
-from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask
+from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask, moving_score
 from droidw_cli.dynamics.inloop import KeyframeMasks, observed_disparity
 from droidw_cli.slam import graph
 from droidw_cli.slam.distance import frame_distance, transfer_disparity
@@ -218,6 +218,7 @@ class Frontend:
 
     def _store(self, key: tuple[int, int], c, epipolar: np.ndarray | None) -> None:
         self.cache.put(*key, c.target, c.weight, born=self.shared.iterations)
+        self.masks.keep_edge(*key, c.target, c.weight)
         if self._masking:
             self._raw[key] = c.weight
         if self._segmenting and epipolar is not None:
@@ -244,6 +245,8 @@ class Frontend:
                 moving = moving_mask(epi, d.epipolar_thresh, d.epipolar_dilate)
                 if moving.mean() > MAX_MOVING:
                     moving[:] = False
+                else:
+                    self.masks.record_score(i, moving_score(epi, d.epipolar_thresh))
                 self.masks.record(i, moving)
                 masked |= moving
             keep = torch.from_numpy(~masked).float()[..., None]
