@@ -59,7 +59,7 @@ SAMPLES = 24
 class MotionParams:
     """Thresholds of the monocular motion masks (see the module docstring)."""
 
-    min_px: float = 0.35
+    min_px: float = 0.2
     noise: float = 4.0
     min_weight: float = 0.2
     low_weight: float = 0.2
