@@ -72,6 +72,7 @@ class DynamicRecord:
     masks: np.ndarray
     ids: np.ndarray
     table: np.ndarray
+    masked: np.ndarray | None = None  # (K, h, w) bool: masks ∪ the in-loop record (what BA zeroed; the static map's exclusion)
 
 
 def _depth(disp: Tensor) -> Tensor:
@@ -246,4 +247,5 @@ def finish(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsic
     ``poses_w2c`` (K, 7), ``disps_obs`` (K, h, w) observed disparities, ``intrinsics`` (4,) of the grid.
     """
     dynamic = final_pass(masks, poses_w2c, disps_obs, intrinsics, cfg, sensor_depth)
-    return track_objects(masks, poses_w2c, disps_obs, intrinsics, cfg, dynamic, sensor_depth)
+    rec = track_objects(masks, poses_w2c, disps_obs, intrinsics, cfg, dynamic, sensor_depth)
+    return DynamicRecord(rec.masks, rec.ids, rec.table, rec.masks | masks.stacked())
