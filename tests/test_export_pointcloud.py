@@ -67,7 +67,7 @@ def test_static_points_keep_a_margin_from_the_dynamic_mask():
     run["dynamic"] = dynamic
     run["object_ids"] = np.where(dynamic, 0, -1).astype(np.int32)
     plain = build_cloud(run, CloudParams(dynamic_margin=0)).static.reshape(dynamic.shape)
-    margin = build_cloud(run, CloudParams()).static.reshape(dynamic.shape)
+    margin = build_cloud(run, CloudParams(dynamic_margin=1)).static.reshape(dynamic.shape)
     assert not plain[2, 4:8, 6:10].any() and not margin[2, 4:8, 6:10].any()
     assert plain[2, 3, 6:10].all() and plain[2, 4:8, 10].all()  # the ring next to the mask
     assert not margin[2, 3, 5:11].any() and not margin[2, 4:8, 10].any()
@@ -87,3 +87,5 @@ def test_static_cloud_leaves_out_the_pixels_ba_zeroed():
     assert not static[3, 5:7, 5:7].any() and static[3, 4, 5:7].all()
     cloud = build_cloud(run, CloudParams(dynamic_margin=0))
     assert not cloud.dynamic.any()  # the output mask stays what it was
+    grown = build_cloud(run, CloudParams(dynamic_margin=1)).static.reshape(dynamic.shape)  # the margin grows 'masked' too
+    assert not grown[3, 4:8, 4:8].any() and grown[3, 3, 5:7].all()

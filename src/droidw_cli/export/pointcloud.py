@@ -45,7 +45,7 @@ class CloudParams:
     radius: int = 2
     rel_tol: float = 0.05
     stride: int = 1  # use every N-th keyframe
-    dynamic_margin: int = 1  # static points keep this many grid cells away from M_k (mixed outline cells)
+    dynamic_margin: int = 0  # static points keep this many grid cells away from M_k (mixed outline cells)
 
 
 @dataclass(frozen=True)
@@ -126,7 +126,7 @@ def build_cloud(npz: dict, params: CloudParams) -> Cloud:
         away = dynamic | np.asarray(npz["masked"], dtype=bool) if "masked" in npz else dynamic
         if params.dynamic_margin > 0 and away.any():
             kernel = np.ones((2 * params.dynamic_margin + 1,) * 2, np.uint8)
-            away = np.stack([cv2.dilate(m.astype(np.uint8), kernel) > 0 for m in dynamic])
+            away = np.stack([cv2.dilate(m.astype(np.uint8), kernel) > 0 for m in away])
         static &= ~away
     else:
         dynamic, ids = ~static, np.full(static.shape, -1, dtype=np.int32)
