@@ -91,7 +91,7 @@ def test_motion_masks_find_a_moving_square_under_the_final_poses():
 
 
 def test_keyframe_masks_keep_short_edges_and_renumber_on_removal():
-    km = KeyframeMasks(DynamicsConfig(), (H, W), consistency=False)
+    km = KeyframeMasks(DynamicsConfig(), (H, W), consistency=False, keep_flow=True)
     for _ in range(5):
         km.append(np.zeros((H * 8, W * 8, 3), np.uint8))
     target, weight = torch.zeros(H, W, 2), torch.ones(H, W, 2)
@@ -101,4 +101,35 @@ def test_keyframe_masks_keep_short_edges_and_renumber_on_removal():
     assert km.edges[(0, 1)][1].dtype == np.uint8 and int(km.edges[(0, 1)][1].max()) == 255
     km.remove(1)
     assert set(km.edges) == {(2, 3)}
-    assert len(km.scores) == 4
+    assert len(km) == 4
+    off = KeyframeMasks(DynamicsConfig(), (H, W), consistency=False)  # RGB-D or consistency: nothing kept
+    off.append(np.zeros((H * 8, W * 8, 3), np.uint8))
+    off.keep_edge(0, 1, target, weight)
+    assert not off.edges
+
+
+def test_finalise_turns_the_edges_of_settled_keyframes_into_masks_and_drops_them():
+    """Archived keyframes (global BA horizon) get their mask at once: memory stays bounded, masks equal."""
+    rng = np.random.default_rng(2)
+    depth = rng.uniform(2.0, 4.0, (H, W))
+    rot, trans = _rot(0.03), np.array([0.15, 0.0, 0.02])
+    poses = torch.stack([_w2c(np.eye(3), np.zeros(3)), _w2c(rot, trans), _w2c(rot @ rot, 2 * trans)])
+    disps = torch.from_numpy(1.0 / depth).float().expand(3, H, W)
+    km = KeyframeMasks(DynamicsConfig(), (H, W), consistency=False, keep_flow=True)
+    for _ in range(3):
+        km.append(np.zeros((H * 8, W * 8, 3), np.uint8))
+    target = _static_targets(depth, rot, trans)
+    target[8:16, 10:18] += np.array([0.0, 2.0])
+    full = torch.ones(H, W)
+    for i, j in [(0, 1), (1, 2), (2, 1)]:
+        km.keep_edge(i, j, torch.from_numpy(target).float(), full)
+    expected = motion_masks(dict(km.edges), poses, disps, torch.from_numpy(KK))
+    km.finalise(1, poses, disps, torch.from_numpy(KK))
+    assert len(km.final) == 1 and set(km.edges) == {(1, 2), (2, 1)}
+    km.keep_edge(0, 2, torch.from_numpy(target).float(), full)  # a settled keyframe takes no new edges
+    assert (0, 2) not in km.edges
+    out = km.output_masks(poses, disps, torch.from_numpy(KK))
+    assert len(out) == 3 and not km.edges
+    for a, b in zip(out, expected):
+        assert torch.equal(a, b)
+    assert out[0][8:16, 10:18].float().mean() > 0.8

@@ -106,14 +106,6 @@ def epipolar_distance(flow: np.ndarray, weight: np.ndarray, min_weight: float = 
     return sampson.reshape(h, w).astype(np.float32)
 
 
-def moving_score(distances: list[np.ndarray], thresh: float) -> np.ndarray:
-    """(h, w) float32: max over the edges of d_j / τ_j (above 1: moving on some edge, undilated)."""
-    score = np.zeros(distances[0].shape, dtype=np.float32)
-    for d in distances:
-        score = np.maximum(score, d / max(thresh, NOISE_FACTOR * float(np.median(d))))
-    return score
-
-
 def moving_mask(distances: list[np.ndarray], thresh: float, dilate: int) -> np.ndarray:
     """(h, w) bool: some edge's Sampson distance above its threshold, dilated by ``dilate`` cells."""
     mask = np.zeros(distances[0].shape, dtype=bool)

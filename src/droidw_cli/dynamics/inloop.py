@@ -32,6 +32,7 @@ from torch import Tensor
 from droidw_cli.config import DynamicsConfig
 from droidw_cli.dynamics.consistency import inconsistency
 from droidw_cli.dynamics.params import DetectionParams
+from droidw_cli.dynamics.posthoc import motion_masks
 from droidw_cli.dynamics.refine import Objects
 from droidw_cli.dynamics.segmenter import get_segmenter
 from droidw_cli.dynamics.warp import predict_views
@@ -102,10 +103,13 @@ class KeyframeMasks:
     """Dynamic masks of the keyframes, and scene-consistency detection for new ones.
 
     ``consistency`` False keeps only the record (for the epipolar masks and the map).
+    ``keep_flow``: keep the short edges' grid flow for the monocular output masks
+    (:mod:`~droidw_cli.dynamics.posthoc`), until :meth:`finalise` turns a keyframe's
+    edges into its mask.
     """
 
     def __init__(self, cfg: DynamicsConfig, grid: tuple[int, int], consistency: bool,
-                 params: DetectionParams | None = None) -> None:
+                 params: DetectionParams | None = None, keep_flow: bool = False) -> None:
         self.cfg = cfg
         self.grid = grid
         self.consistency = consistency
@@ -115,13 +119,12 @@ class KeyframeMasks:
         self.masks = PackedMasks(grid)  # union of every mask ever given (the map leaves these out)
         self.current = PackedMasks(grid)  # the latest consistency mask (BA zeroes these)
         self.times: list[float] = []  # keyframe timestamps (object motion over time)
-        # per keyframe the epipolar motion score max_j d_j / τ_j over its edges so far, undilated
-        # (epipolar.moving_score; float16, 6 KB at 48 × 64): the monocular output masks start from it
-        self.scores: list[np.ndarray] = []
+        self.keep_flow = keep_flow
         # grid flow of the short edges (|i − j| ≤ EDGE_SPAN): (i, j) → (target p*_ij (h, w, 2) float16 in grid
-        # px of j, confidence (h, w) uint8 in 1/255); 15 KB an edge, about 60 KB a keyframe.  The monocular
-        # output masks test it against the final poses (dynamics/posthoc.py)
+        # px of j, confidence (h, w) uint8 in 1/255); 15 KB an edge, about 60 KB a keyframe, kept only until the
+        # keyframe's poses are final (finalise), so bounded by the global BA's horizon
         self.edges: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self.final = PackedMasks(grid)  # the monocular output masks of keyframes [0, len(final)), see finalise
 
     def __len__(self) -> int:
         return len(self.masks)
@@ -132,7 +135,6 @@ class KeyframeMasks:
         self.times.append(float(len(self.times) if timestamp is None else timestamp))
         self.masks.append(np.zeros(self.grid, dtype=bool))
         self.current.append(np.zeros(self.grid, dtype=bool))
-        self.scores.append(np.zeros(self.grid, dtype=np.float16))
 
     def image(self, k: int) -> Tensor:
         """Keyframe k's colour on the grid, (h, w, 3) float32 in [0, 1]."""
@@ -146,7 +148,8 @@ class KeyframeMasks:
         del self.masks[k]
         del self.current[k]
         del self.times[k]
-        del self.scores[k]
+        if k < len(self.final):
+            del self.final[k]
 
         def renumber(i: int) -> int:
             return i - (i > k)
@@ -159,16 +162,28 @@ class KeyframeMasks:
 
     def keep_edge(self, i: int, j: int, target: Tensor, weight: Tensor) -> None:
         """Keep the grid flow of edge i → j when it is short (``EDGE_SPAN``); target (h, w, 2), weight (h, w[, 2])."""
-        if abs(i - j) > EDGE_SPAN:
+        if not self.keep_flow or abs(i - j) > EDGE_SPAN or i < len(self.final):
             return
         w = weight.detach().cpu().float()
         w = w[..., 0] if w.dim() == 3 else w
         self.edges[(i, j)] = (target.detach().cpu().numpy().astype(np.float16),
                               np.round(w.clamp(0, 1).numpy() * 255).astype(np.uint8))
 
-    def record_score(self, k: int, score: np.ndarray) -> None:
-        """Keyframe k's epipolar motion score is now at least ``score`` (h, w) (the max over its edges)."""
-        self.scores[k] = np.maximum(self.scores[k], np.asarray(score, dtype=np.float16))
+    def finalise(self, hi: int, poses_w2c: Tensor, disps: Tensor, intrinsics: Tensor) -> None:
+        """Keyframes [len(final), hi) have their final poses: their monocular output masks from the kept edges
+        under these poses (``poses_w2c`` (K, 7) and observed ``disps`` (K, h, w) of keyframes [0, K)), and their
+        edges are dropped.  Without ``keep_flow`` nothing happens."""
+        lo = len(self.final)
+        if not self.keep_flow or hi <= lo:
+            return
+        for m in motion_masks(self.edges, poses_w2c, disps, intrinsics, range(lo, hi)):
+            self.final.append(m)
+        self.edges = {key: v for key, v in self.edges.items() if key[0] >= hi}
+
+    def output_masks(self, poses_w2c: Tensor, disps: Tensor, intrinsics: Tensor) -> list[Tensor]:
+        """Every keyframe's monocular output mask: :meth:`finalise` on the ones not final yet."""
+        self.finalise(len(self), poses_w2c, disps, intrinsics)
+        return list(self.final)
 
     def set_current(self, k: int, mask: Tensor | None) -> None:
         """Keyframe k's consistency mask for BA is now ``mask`` (None: no mask); it also joins the record."""

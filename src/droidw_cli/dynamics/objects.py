@@ -55,7 +55,6 @@ from torch import Tensor
 
 from droidw_cli.config import DynamicsConfig
 from droidw_cli.dynamics.inloop import KeyframeMasks
-from droidw_cli.dynamics.posthoc import motion_masks
 from droidw_cli.dynamics.tracker import DynamicObjectTracker
 from droidw_cli.slam.poses import invert, to_matrix
 
@@ -171,8 +170,8 @@ def final_pass(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intri
     """
     n = len(masks)
     if not masks.consistency:
-        if not sensor_depth and masks.edges:  # monocular: the flow the final poses cannot explain
-            return motion_masks(masks.edges, poses_w2c[:n], disps_obs[:n], intrinsics)
+        if masks.keep_flow and not sensor_depth:  # monocular: the flow the final poses cannot explain
+            return masks.output_masks(poses_w2c[:n], disps_obs[:n], intrinsics)
         return [masks.masks[k].clone() for k in range(n)]
     g = poses_w2c[:n].detach().float().cpu()
     d = disps_obs[:n].detach().float().cpu()

@@ -91,14 +91,15 @@ def motion_distance(target: np.ndarray, rot: np.ndarray, trans: np.ndarray, kk: 
     return np.where(np.isfinite(out), out, 0.0)
 
 
-def edge_scores(k: int, edges: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], c2w: np.ndarray,
-                disp: np.ndarray, kk: np.ndarray, p: MotionParams) -> tuple[np.ndarray, np.ndarray]:
-    """Keyframe k's (E, h, w) score distance / τ_e on each kept edge and (E, h, w) confidence in [0, 1]."""
+def edge_scores(k: int, edges: list[tuple[int, np.ndarray, np.ndarray]], c2w: np.ndarray, disp: np.ndarray,
+                kk: np.ndarray, p: MotionParams) -> tuple[np.ndarray, np.ndarray]:
+    """Keyframe k's (E, h, w) score distance / τ_e on each of its kept edges ``(j, target, weight)`` and
+    (E, h, w) confidence in [0, 1]."""
     valid = disp[disp > 0]
     rho_max = RHO_FACTOR * float(np.percentile(valid, 98)) if valid.size else 1.0
     scores, weights = [], []
-    for (i, j), (target, weight) in sorted(edges.items()):
-        if i != k or j >= len(c2w):
+    for j, target, weight in edges:
+        if j >= len(c2w):
             continue
         conf = weight.astype(np.float64) / 255.0
         weights.append(conf)
@@ -146,15 +147,21 @@ def clean(seed: np.ndarray, p: MotionParams) -> np.ndarray:
 
 
 def motion_masks(edges: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]], poses_w2c: Tensor, disps: Tensor,
-                 intrinsics: Tensor, params: MotionParams | None = None) -> list[Tensor]:
-    """(h, w) bool motion mask of every keyframe from its kept edges under the final poses."""
+                 intrinsics: Tensor, keyframes: range | None = None,
+                 params: MotionParams | None = None) -> list[Tensor]:
+    """(h, w) bool motion mask of each of ``keyframes`` (default: all of ``poses_w2c``) from its kept edges
+    under the final poses."""
     p = params or MotionParams()
-    n = len(poses_w2c)
+    ks = range(len(poses_w2c)) if keyframes is None else keyframes
+    by_source: dict[int, list[tuple[int, np.ndarray, np.ndarray]]] = {k: [] for k in ks}
+    for (i, j), (target, weight) in sorted(edges.items()):
+        if i in by_source:
+            by_source[i].append((j, target, weight))
     c2w = to_matrix(invert(poses_w2c.detach().double().cpu()))
-    d = disps.detach().float().cpu().numpy()
     kk = intrinsics.detach().double().cpu().numpy()
     out = []
-    for k in range(n):
-        scores, weights = edge_scores(k, edges, c2w, d[k], kk, p)
+    for k in ks:
+        d = disps[k].detach().float().cpu().numpy()
+        scores, weights = edge_scores(k, by_source[k], c2w, d, kk, p)
         out.append(torch.from_numpy(keyframe_mask(scores, weights, p)))
     return out

@@ -55,7 +55,7 @@ from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.ba.params import BAParams
 from droidw_cli.config import TrackConfig
 from droidw_cli.correspondence.base import Correspondence, MatchCall
-from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask, moving_score
+from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask
 from droidw_cli.dynamics.inloop import KeyframeMasks, observed_disparity
 from droidw_cli.slam import graph
 from droidw_cli.slam.distance import frame_distance, transfer_disparity
@@ -157,7 +157,9 @@ class Frontend:
                             and params.optimize_focal == "none")
         self._epipolar: dict[tuple[int, int], tuple[np.ndarray, torch.Tensor]] = {}
         # dynamic masks of every keyframe (scene consistency with dynamics.mode consistency|both)
-        self.masks = KeyframeMasks(cfg.dynamics, grid, cfg.dynamics.consistency)
+        # monocular without scene consistency: the output masks come from the short edges' flow (dynamics/posthoc.py)
+        keep_flow = cfg.dynamics.mode != "none" and not cfg.dynamics.consistency and not cfg.io.use_depth
+        self.masks = KeyframeMasks(cfg.dynamics, grid, cfg.dynamics.consistency, keep_flow=keep_flow)
         self._raw: dict[tuple[int, int], torch.Tensor] = {}  # raw confidences, while masks may change
         self._masking = self._segmenting or cfg.dynamics.consistency
         h, w = grid
@@ -245,8 +247,6 @@ class Frontend:
                 moving = moving_mask(epi, d.epipolar_thresh, d.epipolar_dilate)
                 if moving.mean() > MAX_MOVING:
                     moving[:] = False
-                else:
-                    self.masks.record_score(i, moving_score(epi, d.epipolar_thresh))
                 self.masks.record(i, moving)
                 masked |= moving
             keep = torch.from_numpy(~masked).float()[..., None]
@@ -450,6 +450,10 @@ class Frontend:
         conf = self.confidence(lo, hi)
         for k in range(lo, hi):
             self.buffer.archive(k, None if u is None else u[k - lo], conf[k - lo])
+        n = len(self.buffer)
+        prior = self.buffer.depth_prior[:n] if self.buffer.has_prior else None
+        self.masks.finalise(hi, self.buffer.poses[:n], observed_disparity(self.buffer.disps[:n], prior),
+                            self.shared.intrinsics)
 
     def _evict(self, k: int) -> None:
         """Drop the working-resolution images and epipolar maps of keyframes that left the window."""
