@@ -58,3 +58,34 @@ def test_stride_and_no_partial_file(tmp_path):
     target = tmp_path / "sub" / "x.ply"
     write_ply(target, full, with_time=False)
     assert target.is_file() and not list(target.parent.glob(".*tmp"))
+
+
+def test_static_points_keep_a_margin_from_the_dynamic_mask():
+    run = _plane_run(mover=False)
+    dynamic = np.zeros(run["disps"].shape, bool)
+    dynamic[2, 4:8, 6:10] = True
+    run["dynamic"] = dynamic
+    run["object_ids"] = np.where(dynamic, 0, -1).astype(np.int32)
+    plain = build_cloud(run, CloudParams(dynamic_margin=0)).static.reshape(dynamic.shape)
+    margin = build_cloud(run, CloudParams(dynamic_margin=1)).static.reshape(dynamic.shape)
+    assert not plain[2, 4:8, 6:10].any() and not margin[2, 4:8, 6:10].any()
+    assert plain[2, 3, 6:10].all() and plain[2, 4:8, 10].all()  # the ring next to the mask
+    assert not margin[2, 3, 5:11].any() and not margin[2, 4:8, 10].any()
+    assert margin[2, 2, 6:10].all() and margin[2, 4:8, 11].all()  # two cells away: static again
+    assert margin[1].sum() == plain[1].sum()  # other keyframes untouched
+
+
+def test_static_cloud_leaves_out_the_pixels_ba_zeroed():
+    run = _plane_run(mover=False)
+    dynamic = np.zeros(run["disps"].shape, bool)
+    run["dynamic"] = dynamic
+    run["object_ids"] = np.full(dynamic.shape, -1, np.int32)
+    masked = dynamic.copy()
+    masked[3, 5:7, 5:7] = True  # zeroed in the loop, not in the output mask
+    run["masked"] = masked
+    static = build_cloud(run, CloudParams(dynamic_margin=0)).static.reshape(dynamic.shape)
+    assert not static[3, 5:7, 5:7].any() and static[3, 4, 5:7].all()
+    cloud = build_cloud(run, CloudParams(dynamic_margin=0))
+    assert not cloud.dynamic.any()  # the output mask stays what it was
+    grown = build_cloud(run, CloudParams(dynamic_margin=1)).static.reshape(dynamic.shape)  # the margin grows 'masked' too
+    assert not grown[3, 4:8, 4:8].any() and grown[3, 3, 5:7].all()

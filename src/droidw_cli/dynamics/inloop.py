@@ -32,12 +32,15 @@ from torch import Tensor
 from droidw_cli.config import DynamicsConfig
 from droidw_cli.dynamics.consistency import inconsistency
 from droidw_cli.dynamics.params import DetectionParams
+from droidw_cli.dynamics.posthoc import motion_masks
 from droidw_cli.dynamics.refine import Objects
 from droidw_cli.dynamics.segmenter import get_segmenter
 from droidw_cli.dynamics.warp import predict_views
 
 #: a consistency mask over this share of the view is taken for a failed prediction and dropped
 MAX_MASKED = 0.5
+#: the grid flow of edges i → j with |i − j| up to this is kept for the final masks
+EDGE_SPAN = 2
 
 
 class PackedMasks:
@@ -100,10 +103,13 @@ class KeyframeMasks:
     """Dynamic masks of the keyframes, and scene-consistency detection for new ones.
 
     ``consistency`` False keeps only the record (for the epipolar masks and the map).
+    ``keep_flow``: keep the short edges' grid flow for the monocular output masks
+    (:mod:`~droidw_cli.dynamics.posthoc`), until :meth:`finalise` turns a keyframe's
+    edges into its mask.
     """
 
     def __init__(self, cfg: DynamicsConfig, grid: tuple[int, int], consistency: bool,
-                 params: DetectionParams | None = None) -> None:
+                 params: DetectionParams | None = None, keep_flow: bool = False) -> None:
         self.cfg = cfg
         self.grid = grid
         self.consistency = consistency
@@ -113,6 +119,12 @@ class KeyframeMasks:
         self.masks = PackedMasks(grid)  # union of every mask ever given (the map leaves these out)
         self.current = PackedMasks(grid)  # the latest consistency mask (BA zeroes these)
         self.times: list[float] = []  # keyframe timestamps (object motion over time)
+        self.keep_flow = keep_flow
+        # grid flow of the short edges (|i − j| ≤ EDGE_SPAN): (i, j) → (target p*_ij (h, w, 2) float16 in grid
+        # px of j, confidence (h, w) uint8 in 1/255); 15 KB an edge, about 60 KB a keyframe, kept only until the
+        # keyframe's poses are final (finalise), so bounded by the global BA's horizon
+        self.edges: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self.final = PackedMasks(grid)  # the monocular output masks of keyframes [0, len(final)), see finalise
 
     def __len__(self) -> int:
         return len(self.masks)
@@ -136,10 +148,42 @@ class KeyframeMasks:
         del self.masks[k]
         del self.current[k]
         del self.times[k]
+        if k < len(self.final):
+            del self.final[k]
+
+        def renumber(i: int) -> int:
+            return i - (i > k)
+
+        self.edges = {(renumber(a), renumber(b)): v for (a, b), v in self.edges.items() if k not in (a, b)}
 
     def record(self, k: int, mask: Tensor | np.ndarray) -> None:
         """Add ``mask`` (h, w) to keyframe k's union of dynamic masks."""
         self.masks[k] |= torch.as_tensor(np.asarray(mask, dtype=bool))
+
+    def keep_edge(self, i: int, j: int, target: Tensor, weight: Tensor) -> None:
+        """Keep the grid flow of edge i → j when it is short (``EDGE_SPAN``); target (h, w, 2), weight (h, w[, 2])."""
+        if not self.keep_flow or abs(i - j) > EDGE_SPAN or i < len(self.final):
+            return
+        w = weight.detach().cpu().float()
+        w = w[..., 0] if w.dim() == 3 else w
+        self.edges[(i, j)] = (target.detach().cpu().numpy().astype(np.float16),
+                              np.round(w.clamp(0, 1).numpy() * 255).astype(np.uint8))
+
+    def finalise(self, hi: int, poses_w2c: Tensor, disps: Tensor, intrinsics: Tensor) -> None:
+        """Keyframes [len(final), hi) have their final poses: their monocular output masks from the kept edges
+        under these poses (``poses_w2c`` (K, 7) and observed ``disps`` (K, h, w) of keyframes [0, K)), and their
+        edges are dropped.  Without ``keep_flow`` nothing happens."""
+        lo = len(self.final)
+        if not self.keep_flow or hi <= lo:
+            return
+        for m in motion_masks(self.edges, poses_w2c, disps, intrinsics, range(lo, hi)):
+            self.final.append(m)
+        self.edges = {key: v for key, v in self.edges.items() if key[0] >= hi}
+
+    def output_masks(self, poses_w2c: Tensor, disps: Tensor, intrinsics: Tensor) -> list[Tensor]:
+        """Every keyframe's monocular output mask: :meth:`finalise` on the ones not final yet."""
+        self.finalise(len(self), poses_w2c, disps, intrinsics)
+        return list(self.final)
 
     def set_current(self, k: int, mask: Tensor | None) -> None:
         """Keyframe k's consistency mask for BA is now ``mask`` (None: no mask); it also joins the record."""

@@ -14,8 +14,10 @@ After the global BA (:func:`finish`):
    that overlaps its own earlier position is often flagged by one side only,
    and the views' "at least half" rule of one test over both sides then
    drops it (mask IoU 0.69 against 0.76 on rotate, 0.80 against 0.84 on
-   stopgo, the same precision).  Without scene consistency M_k is the in-loop
-   record (the epipolar masks).
+   stopgo, the same precision).  Without scene consistency and without a depth
+   sensor, M_k is the monocular motion mask of the kept short edges' flow under
+   the final poses (:mod:`~droidw_cli.dynamics.posthoc`; the in-loop epipolar
+   record had mask IoU 0.20-0.32); with a sensor, the in-loop record.
 2. Object ids (:class:`~droidw_cli.dynamics.tracker.DynamicObjectTracker`:
    association by the overlap of predicted masks, ADD-SLAM's rules for weak
    matches) over the keyframes in order.  Keyframes lie several frames apart,
@@ -69,6 +71,7 @@ class DynamicRecord:
     masks: np.ndarray
     ids: np.ndarray
     table: np.ndarray
+    masked: np.ndarray | None = None  # (K, h, w) bool: masks ∪ the in-loop record (what BA zeroed; the static map's exclusion)
 
 
 def _depth(disp: Tensor) -> Tensor:
@@ -157,15 +160,18 @@ def _propagate(masks: KeyframeMasks, mask: Tensor, image: Tensor, depth: Tensor,
 
 
 def final_pass(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsics: Tensor,
-               cfg: DynamicsConfig) -> list[Tensor]:
+               cfg: DynamicsConfig, sensor_depth: bool = False) -> list[Tensor]:
     """Step 1: the output dynamic mask of every keyframe, (h, w) bool each.
 
     With scene consistency on: the union of the consistency masks under the final poses against the
     keyframes before and against those after (each side tested on its own) and the keyframe's last
-    in-loop consistency mask.  Without it: the in-loop record (epipolar masks).
+    in-loop consistency mask.  Without it: monocular (not ``sensor_depth``), the motion masks of
+    :func:`~droidw_cli.dynamics.posthoc.motion_masks`; else the in-loop record (epipolar masks).
     """
     n = len(masks)
     if not masks.consistency:
+        if masks.keep_flow and not sensor_depth:  # monocular: the flow the final poses cannot explain
+            return masks.output_masks(poses_w2c[:n], disps_obs[:n], intrinsics)
         return [masks.masks[k].clone() for k in range(n)]
     g = poses_w2c[:n].detach().float().cpu()
     d = disps_obs[:n].detach().float().cpu()
@@ -239,5 +245,6 @@ def finish(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsic
 
     ``poses_w2c`` (K, 7), ``disps_obs`` (K, h, w) observed disparities, ``intrinsics`` (4,) of the grid.
     """
-    dynamic = final_pass(masks, poses_w2c, disps_obs, intrinsics, cfg)
-    return track_objects(masks, poses_w2c, disps_obs, intrinsics, cfg, dynamic, sensor_depth)
+    dynamic = final_pass(masks, poses_w2c, disps_obs, intrinsics, cfg, sensor_depth)
+    rec = track_objects(masks, poses_w2c, disps_obs, intrinsics, cfg, dynamic, sensor_depth)
+    return DynamicRecord(rec.masks, rec.ids, rec.table, rec.masks | masks.stacked())

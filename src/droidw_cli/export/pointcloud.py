@@ -5,7 +5,11 @@ X = G_k⁻¹ · Π⁻¹(p, d).  A run records M_k, every pixel of keyframe k tha
 ever masked dynamic, and the object id of each (``dynamic``, ``object_ids``
 in ``keyframes.npz``).
 
-* **static**: p ∉ M_k, its uncertainty u is under ``max_uncertainty``, *and*
+* **static**: p outside M_k and the pixels BA zeroed (``masked``, where the
+  run has it: the conservative in-loop masks), grown by ``dynamic_margin``
+  cells (a 1/8-grid cell on a mover's outline mixes mover and background),
+  its uncertainty u is under
+  ``max_uncertainty``, *and*
   several views agree on it: projected into the neighbouring keyframes
   k ± 1 … k ± ``radius``, its disparity matches theirs (bilinearly sampled)
   within ``rel_tol`` in at least ``min_views`` of them.
@@ -41,6 +45,7 @@ class CloudParams:
     radius: int = 2
     rel_tol: float = 0.05
     stride: int = 1  # use every N-th keyframe
+    dynamic_margin: int = 0  # static points keep this many grid cells away from M_k (mixed outline cells)
 
 
 @dataclass(frozen=True)
@@ -118,7 +123,11 @@ def build_cloud(npz: dict, params: CloudParams) -> Cloud:
     if "dynamic" in npz:
         dynamic = np.asarray(npz["dynamic"], dtype=bool)
         ids = np.asarray(npz["object_ids"], dtype=np.int32)
-        static &= ~dynamic
+        away = dynamic | np.asarray(npz["masked"], dtype=bool) if "masked" in npz else dynamic
+        if params.dynamic_margin > 0 and away.any():
+            kernel = np.ones((2 * params.dynamic_margin + 1,) * 2, np.uint8)
+            away = np.stack([cv2.dilate(m.astype(np.uint8), kernel) > 0 for m in away])
+        static &= ~away
     else:
         dynamic, ids = ~static, np.full(static.shape, -1, dtype=np.int32)
     keep = np.zeros(kf, dtype=bool)

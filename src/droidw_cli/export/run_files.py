@@ -41,6 +41,8 @@ def keyframe_arrays(result) -> dict[str, np.ndarray]:
         arrays["dynamic"] = result.kf_dynamic.astype(bool, copy=False)
         arrays["object_ids"] = result.kf_object_ids.astype(np.int32)  # the result keeps int16
         arrays["objects"] = result.objects.astype(np.float64, copy=False)
+        if getattr(result, "kf_masked", None) is not None:
+            arrays["masked"] = result.kf_masked.astype(bool, copy=False)
     if result.kf_uncertainty is not None:
         arrays["uncertainty"] = result.kf_uncertainty.astype(np.float32, copy=False)
         arrays["features"] = result.kf_features

@@ -157,7 +157,9 @@ class Frontend:
                             and params.optimize_focal == "none")
         self._epipolar: dict[tuple[int, int], tuple[np.ndarray, torch.Tensor]] = {}
         # dynamic masks of every keyframe (scene consistency with dynamics.mode consistency|both)
-        self.masks = KeyframeMasks(cfg.dynamics, grid, cfg.dynamics.consistency)
+        # monocular without scene consistency: the output masks come from the short edges' flow (dynamics/posthoc.py)
+        keep_flow = cfg.dynamics.mode != "none" and not cfg.dynamics.consistency and not cfg.io.use_depth
+        self.masks = KeyframeMasks(cfg.dynamics, grid, cfg.dynamics.consistency, keep_flow=keep_flow)
         self._raw: dict[tuple[int, int], torch.Tensor] = {}  # raw confidences, while masks may change
         self._masking = self._segmenting or cfg.dynamics.consistency
         h, w = grid
@@ -218,6 +220,7 @@ class Frontend:
 
     def _store(self, key: tuple[int, int], c, epipolar: np.ndarray | None) -> None:
         self.cache.put(*key, c.target, c.weight, born=self.shared.iterations)
+        self.masks.keep_edge(*key, c.target, c.weight)
         if self._masking:
             self._raw[key] = c.weight
         if self._segmenting and epipolar is not None:
@@ -448,6 +451,10 @@ class Frontend:
         conf = self.confidence(lo, hi)
         for k in range(lo, hi):
             self.buffer.archive(k, None if u is None else u[k - lo], conf[k - lo])
+        n = len(self.buffer)
+        prior = self.buffer.depth_prior[:n] if self.buffer.has_prior else None
+        self.masks.finalise(hi, self.buffer.poses[:n], observed_disparity(self.buffer.disps[:n], prior),
+                            self.shared.intrinsics)
 
     def _evict(self, k: int) -> None:
         """Drop the working-resolution images and epipolar maps of keyframes that left the window."""

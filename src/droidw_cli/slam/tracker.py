@@ -67,6 +67,7 @@ class TrackResult:
     timings: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     wall_time: float = 0.0
+    kf_masked: np.ndarray | None = None  # (K, h, w) bool: kf_dynamic ∪ every pixel BA zeroed (static map exclusion)
 
     @property
     def fps(self) -> float:
@@ -107,7 +108,7 @@ def _dynamic_record(fe: Frontend, preparer: FramePreparer) -> DynamicRecord | No
     for col, off, scale in ((2, ox, rw / sw), (3, oy, rh / sh)):  # grid px → working px → input px
         work = (table[:, col] + 0.5) * BA_SCALE - 0.5
         table[:, col] = (work + off + 0.5) / scale - 0.5
-    return DynamicRecord(rec.masks, rec.ids, table)
+    return DynamicRecord(rec.masks, rec.ids, table, rec.masked)
 
 
 def _confidence_half(fe: Frontend, chunk: int = 256) -> np.ndarray:
@@ -280,6 +281,7 @@ class Tracker:
             kf_confidence=_confidence_half(fe),
             kf_dynamic=None if dyn is None else dyn.masks,
             kf_object_ids=None if dyn is None else dyn.ids,
+            kf_masked=None if dyn is None else dyn.masked,
             objects=None if dyn is None else dyn.table,
             theta=theta,
             initialised=fe.initialised,
