@@ -225,3 +225,15 @@ def test_touching_squares_that_swapped_sides_keep_their_ids_by_the_carried_masks
     tr2 = DynamicObjectTracker(split_colour=0.0)
     tr2.update(a0 | b0)
     assert _ids_by_box(tr2.update(a1 | b1), {"a": a1, "b": b1}) != first  # without them the ids swap
+
+
+def test_a_carried_mask_replaces_the_centre_hypotheses():
+    """a is carried by the flow to where the mask misses it; a misleading centre hypothesis on a new
+    blob b must not hand b a's id (without the carried mask it does)."""
+    a0, b1 = _box(20, 20, 12, 16), _box(60, 20, 12, 16)
+    for carried, same in ((True, False), (False, True)):
+        tr = DynamicObjectTracker()
+        (obj,) = tr.update(a0)
+        got = tr.update(b1, predicted={obj.id: (66.0, 28.0)},
+                        predicted_masks={obj.id: _box(24, 20, 12, 16)} if carried else None)
+        assert (got[0].id == obj.id) == same

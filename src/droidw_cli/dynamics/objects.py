@@ -34,9 +34,10 @@ After the global BA (:func:`finish`):
    first prediction of each object of keyframe k − 1 is its pixels carried
    into k by the recorded flow (:func:`_carry`; the pixels of k whose match
    in k − 1 by the edge (k, k − 1) lies on the object): it follows each
-   walker of a pile, where a shifted mask cuts across them (id switches
-   rotate 15 → 9, stopgo 5 → 3, wobble 7 and walk 2 unchanged; carried
-   forward by the edge (k − 1, k) instead: 11, 3, 8, 3).  With a depth sensor
+   walker of a pile, where a shifted mask cuts across them; it replaces the
+   centre hypotheses of the objects it carries (id switches rotate 15 → 9,
+   stopgo 5 → 3, wobble 7 → 5, walk 2; with the centre hypotheses after it:
+   wobble 7; carried forward by the edge (k − 1, k): 11, 3, 8, 3).  With a depth sensor
    the depth split does better without it (rotate 8 against 11, wobble 1
    against 3).  An active
    object that finds no mask at c' is *propagated* from c': the 3 × 3 pixels

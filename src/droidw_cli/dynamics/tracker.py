@@ -23,7 +23,7 @@ predicted depth δ'_t; else c'_t = c_t, δ'_t = δ_t.
 
 1. Prediction: P_t = M_t shifted by round(c'_t − c_t); where the caller
    gives a mask carried by the image's flow (the object's pixels in the
-   previous frame moved to their matches), that is the first hypothesis.  A track all of whose
+   previous frame moved to their matches), P_t is that mask alone.  A track all of whose
    hypotheses fall outside the image has left the view: it ends ("left").
    A pixel *fits* the track when its depth is unknown or lies in
    [min(δ_t, δ'_t) / (1 + ``depth_tol``), max(δ_t, δ'_t) · (1 + ``depth_tol``)].
@@ -212,7 +212,7 @@ class DynamicObjectTracker:
         ``predicted``: centre c'_t (or a list of hypotheses) of some live tracks in this frame;
         ``depth`` (h, w) (≤ 0: unknown) and ``predicted_depth`` δ'_t of some live tracks;
         ``image`` (h, w, 3) colour in [0, 1]; ``predicted_masks``: P_t of some live tracks carried by the
-        image's flow (the first hypothesis, before the shifted models).  All optional (see the module docstring).
+        image's flow (used instead of their centre hypotheses).  All optional (see the module docstring).
         """
         m = torch.as_tensor(np.asarray(mask.detach().cpu() if isinstance(mask, Tensor) else mask)).bool()
         if m.dim() != 2:
@@ -270,10 +270,11 @@ class DynamicObjectTracker:
         """Steps 1-2: per track still in view, (chosen c'_t, P_t, claims (n,) bool); ends the tracks that left."""
         cands: dict[int, list[tuple[tuple[float, float], np.ndarray]]] = {}
         for tid, obj in live.items():
-            cands[tid] = [(c, p) for c in _hypotheses(predicted.get(tid), obj.centre) if (p := _moved(obj, c)).any()]
-            if tid in carried and carried[tid].any():
+            if tid in carried and carried[tid].any():  # the flow saw the object: no other hypothesis
                 ys, xs = np.nonzero(carried[tid])
-                cands[tid].insert(0, ((float(xs.mean()), float(ys.mean())), carried[tid]))
+                cands[tid] = [((float(xs.mean()), float(ys.mean())), carried[tid])]
+                continue
+            cands[tid] = [(c, p) for c in _hypotheses(predicted.get(tid), obj.centre) if (p := _moved(obj, c)).any()]
             if not cands[tid]:
                 del cands[tid]
                 self.ended.append(TrackEnd(tid, self.frame, "left"))
