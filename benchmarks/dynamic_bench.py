@@ -17,7 +17,8 @@ masks (``keyframes.npz`` ``dynamic``) against the ground truth on the BA
 grid (pooled over the keyframes where a walker covers ≥ 1 cell), object-id
 switches of the worst walker while it stays in view (:func:`id_switches`; in
 brackets the older count over all keyframes where it has an id,
-:func:`id_switches_any`), the number of object ids, the share of ground-truth
+:func:`id_switches_any`), the number of object ids, the share of walkers in view whose id
+another walker in view has too (:func:`id_shared`), the share of ground-truth
 dynamic pixels in the static cloud, and frames/s.
 """
 
@@ -150,6 +151,23 @@ def id_switches(instances: np.ndarray, ids: np.ndarray, in_view: float = IN_VIEW
     return worst
 
 
+def id_shared(instances: np.ndarray, ids: np.ndarray, in_view: float = IN_VIEW) -> float:
+    """Share of the (walker, keyframe) pairs in view with an id (as in :func:`id_switches`) whose id is
+    also that of another walker in view: few id switches mean little when one id covers a pile of walkers."""
+    k = ids.shape[0]
+    visible = instances.reshape(len(instances), k, -1).mean(2) >= in_view
+    best = np.full(visible.shape, -1)
+    for w, inst in enumerate(instances):
+        for j in np.flatnonzero(visible[w]):
+            hit = ids[j][inst[j] & (ids[j] >= 0)]
+            if hit.size:
+                best[w, j] = np.bincount(hit).argmax()
+    have = best >= 0
+    same = (best[:, None, :] == best[None, :, :]) & have[:, None, :] & have[None, :, :]
+    same &= ~np.eye(len(instances), dtype=bool)[:, :, None]
+    return float(same.any(1)[have].sum() / max(1, have.sum()))
+
+
 def one_mode(args: argparse.Namespace) -> None:
     """One --modes case: a cached preset tracked with one config and dynamics.mode; prints a JSON line."""
     from droidw_cli.config import load_config
@@ -186,6 +204,7 @@ def one_mode(args: argparse.Namespace) -> None:
         out["iou"] = float((pred & truth)[seen].sum() / max(1, (pred | truth)[seen].sum()))
         out["id_switches"] = id_switches(inst, result.kf_object_ids)
         out["id_switches_any"] = id_switches_any(inst, result.kf_object_ids)
+        out["id_shared"] = id_shared(inst, result.kf_object_ids)
         out["objects"] = int(len(np.unique(result.objects[:, 1]))) if len(result.objects) else 0
     cloud = build_cloud(keyframe_arrays(result), CloudParams())
     out["static_dynamic_share"] = float((cloud.static & truth.reshape(-1)).sum() / max(1, cloud.static.sum()))
@@ -204,12 +223,12 @@ def modes_table(args: argparse.Namespace) -> None:
             rows.append([preset, "RGB-D" if config == "rgbd" else "mono", mode,
                          f"{ate:.2f} ({'SE3' if config == 'rgbd' else 'Sim3'})", f"{r.get('iou', float('nan')):.2f}",
                          f"{r['id_switches']} ({r['id_switches_any']})" if "id_switches" in r else "–",
-                         r.get("objects", "–"),
+                         r.get("objects", "–"), f"{100 * r['id_shared']:.0f}" if "id_shared" in r else "–",
                          f"{100 * r['static_dynamic_share']:.2f}", f"{r['fps']:.2f}"])
             print(" | ".join(str(c) for c in rows[-1]), file=sys.stderr, flush=True)
     print(f"\nMask modes, monocular and RGB-D, 640x480 presets (seed {args.seeds[0]})")
     print_table(["sequence", "input", "dynamics.mode", "ATE [cm]", "mask IoU", "id switches in view (any)",
-                 "objects", "dynamic in static PLY [%]", "frames/s"], rows)
+                 "objects", "ids shared [%]", "dynamic in static PLY [%]", "frames/s"], rows)
 
 
 def main() -> None:

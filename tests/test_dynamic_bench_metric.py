@@ -52,3 +52,18 @@ def test_the_worst_walker_counts_and_the_majority_id_is_the_walkers():
     ids[2, 10:, :3] = 9  # a few of b's pixels with another id: the majority is still 3
     ids[1][a[1]] = 8
     assert bench.id_switches(np.stack([a, b]), ids) == 2  # a: 7→8→7; b: none
+
+
+def test_shared_ids_count_the_walkers_whose_id_another_walker_in_view_has():
+    a = _walker([30, 30, 30, 30])
+    b = np.zeros_like(a)
+    b[:, 10:, :] = True
+    b[3] = False  # b out of view in the last keyframe
+    ids = np.full(a.shape, -1, np.int32)
+    ids[a] = 1
+    ids[b] = 2
+    ids[:2][b[:2]] = 1  # one id on both for two keyframes
+    # pairs with an id: a × 4, b × 3; shared: a and b in keyframes 0 and 1
+    assert abs(bench.id_shared(np.stack([a, b]), ids) - 4 / 7) < 1e-9
+    ids[:2][b[:2]] = 2
+    assert bench.id_shared(np.stack([a, b]), ids) == 0.0

@@ -21,7 +21,9 @@ with each new full view).  The caller may give predicted centres c'_t (one
 or several hypotheses, e.g. constant world velocity and still) and a
 predicted depth δ'_t; else c'_t = c_t, δ'_t = δ_t.
 
-1. Prediction: P_t = M_t shifted by round(c'_t − c_t).  A track all of whose
+1. Prediction: P_t = M_t shifted by round(c'_t − c_t); where the caller
+   gives a mask carried by the image's flow (the object's pixels in the
+   previous frame moved to their matches), P_t is that mask alone.  A track all of whose
    hypotheses fall outside the image has left the view: it ends ("left").
    A pixel *fits* the track when its depth is unknown or lies in
    [min(δ_t, δ'_t) / (1 + ``depth_tol``), max(δ_t, δ'_t) · (1 + ``depth_tol``)].
@@ -203,12 +205,14 @@ class DynamicObjectTracker:
             self.colours[tid] = hist if tid not in self.colours else 0.5 * (self.colours[tid] + hist)
 
     def update(self, mask, predicted: dict[int, Hypotheses] | None = None, depth: np.ndarray | None = None,
-               predicted_depth: dict[int, float] | None = None, image: np.ndarray | None = None) -> list[TrackedObject]:
+               predicted_depth: dict[int, float] | None = None, image: np.ndarray | None = None,
+               predicted_masks: dict[int, np.ndarray] | None = None) -> list[TrackedObject]:
         """Track the components of a (h, w) bool mask; returns this frame's objects, by id.
 
         ``predicted``: centre c'_t (or a list of hypotheses) of some live tracks in this frame;
         ``depth`` (h, w) (≤ 0: unknown) and ``predicted_depth`` δ'_t of some live tracks;
-        ``image`` (h, w, 3) colour in [0, 1].  All optional (see the module docstring).
+        ``image`` (h, w, 3) colour in [0, 1]; ``predicted_masks``: P_t of some live tracks carried by the
+        image's flow (used instead of their centre hypotheses).  All optional (see the module docstring).
         """
         m = torch.as_tensor(np.asarray(mask.detach().cpu() if isinstance(mask, Tensor) else mask)).bool()
         if m.dim() != 2:
@@ -224,7 +228,7 @@ class DynamicObjectTracker:
         missed = {tid: self.dormant[tid][1] if tid in self.dormant else 0 for tid in live}
         deltas = {tid: float(predicted_depth.get(tid, obj.depth)) for tid, obj in live.items()}
         fits = {tid: self._fit(f, obj, deltas[tid]) for tid, obj in live.items()}
-        chosen = self._claims(f, live, predicted, fits)
+        chosen = self._claims(f, live, predicted, fits, predicted_masks or {})
         pixels = self._split(f, chosen, fits, deltas)
         claimed = np.zeros(f.n, bool)
         for _, _, ok in chosen.values():
@@ -261,10 +265,15 @@ class DynamicObjectTracker:
         return sorted(out, key=lambda o: o.id)
 
     def _claims(self, f: _Frame, live: dict[int, TrackedObject], predicted: dict[int, Hypotheses],
-                fits: dict[int, np.ndarray]) -> dict[int, tuple[tuple[float, float], np.ndarray, np.ndarray]]:
+                fits: dict[int, np.ndarray], carried: dict[int, np.ndarray]
+                ) -> dict[int, tuple[tuple[float, float], np.ndarray, np.ndarray]]:
         """Steps 1-2: per track still in view, (chosen c'_t, P_t, claims (n,) bool); ends the tracks that left."""
         cands: dict[int, list[tuple[tuple[float, float], np.ndarray]]] = {}
         for tid, obj in live.items():
+            if tid in carried and carried[tid].any():  # the flow saw the object: no other hypothesis
+                ys, xs = np.nonzero(carried[tid])
+                cands[tid] = [((float(xs.mean()), float(ys.mean())), carried[tid])]
+                continue
             cands[tid] = [(c, p) for c in _hypotheses(predicted.get(tid), obj.centre) if (p := _moved(obj, c)).any()]
             if not cands[tid]:
                 del cands[tid]
