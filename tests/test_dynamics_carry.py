@@ -2,11 +2,20 @@
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
+import torch
 
+from droidw_cli.config import DynamicsConfig
+from droidw_cli.dynamics.inloop import KeyframeMasks
 from droidw_cli.dynamics.objects import _carry
+
+
+def _masks(h: int, w: int, edges: dict) -> KeyframeMasks:
+    km = KeyframeMasks(DynamicsConfig(), (h, w), consistency=False, keep_flow=True)
+    for _ in range(3):
+        km.append(np.zeros((h * 8, w * 8, 3), np.uint8))
+    km.edges.update(edges)
+    return km
 
 
 def _edge(h: int, w: int, dx: float, dy: float) -> tuple[np.ndarray, np.ndarray]:
@@ -20,7 +29,7 @@ def test_objects_move_with_the_flow_and_leave_the_image():
     prev = np.full((h, w), -1, np.int16)
     prev[5:10, 4:9] = 3
     prev[12:16, 24:29] = 7
-    masks = SimpleNamespace(edges={(0, 1): _edge(h, w, 3.2, -1.0)})
+    masks = _masks(h, w, {(0, 1): _edge(h, w, 3.2, -1.0)})
     got = _carry(masks, 1, prev)
     want = np.zeros((h, w), bool)
     want[4:9, 7:12] = True
@@ -40,9 +49,24 @@ def test_with_the_backward_edge_each_pixel_takes_the_id_at_its_match():
     back_t, conf = _edge(h, w, 0.0, 0.0)
     back_t = back_t.astype(np.float32)
     back_t[5:10, 8:13, 0] -= 4  # the occluder's pixels in k come from 4 px to the left
-    masks = SimpleNamespace(edges={(1, 0): (back_t.astype(np.float16), conf), (0, 1): _edge(h, w, 50.0, 0.0)})
+    masks = _masks(h, w, {(1, 0): (back_t.astype(np.float16), conf), (0, 1): _edge(h, w, 50.0, 0.0)})
     got = _carry(masks, 1, prev)
     want3 = np.zeros((h, w), bool)
     want3[5:10, 4:13] = True  # its old place too: there the (identity) flow points at it
     assert np.array_equal(got[3], want3)  # the backward edge wins over the forward one
     assert got[7].sum() == 5 * 5
+
+
+def test_the_carry_survives_archiving():
+    """Settled keyframes drop their flow (finalise) but keep where each pixel lands: the same carry."""
+    h, w = 20, 30
+    prev = np.full((h, w), -1, np.int16)
+    prev[5:10, 4:9] = 3
+    masks = _masks(h, w, {(1, 0): _edge(h, w, -2.0, 1.0), (0, 1): _edge(h, w, 2.0, -1.0), (2, 1): _edge(h, w, 0, 0)})
+    before = _carry(masks, 1, prev)
+    poses = torch.tensor([[0, 0, 0, 0, 0, 0, 1.0]] * 3)
+    masks.finalise(2, poses, torch.ones(3, h, w), torch.tensor([20.0, 20.0, w / 2, h / 2]))
+    assert set(masks.edges) == {(2, 1)} and set(masks.matches) == {(0, 1), (1, 0)}
+    after = _carry(masks, 1, prev)
+    assert set(after) == set(before) == {3}
+    assert np.array_equal(after[3], before[3]) and after[3].sum() == 25

@@ -125,6 +125,9 @@ class KeyframeMasks:
         # keyframe's poses are final (finalise), so bounded by the global BA's horizon
         self.edges: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self.final = PackedMasks(grid)  # the monocular output masks of keyframes [0, len(final)), see finalise
+        # of the settled keyframes' edges (k, k ± 1) only where each pixel's match lands (match_index), int16,
+        # 6 KB an edge: the object ids of the final pass carry objects along them
+        self.matches: dict[tuple[int, int], np.ndarray] = {}
 
     def __len__(self) -> int:
         return len(self.masks)
@@ -155,6 +158,7 @@ class KeyframeMasks:
             return i - (i > k)
 
         self.edges = {(renumber(a), renumber(b)): v for (a, b), v in self.edges.items() if k not in (a, b)}
+        self.matches = {(renumber(a), renumber(b)): v for (a, b), v in self.matches.items() if k not in (a, b)}
 
     def record(self, k: int, mask: Tensor | np.ndarray) -> None:
         """Add ``mask`` (h, w) to keyframe k's union of dynamic masks."""
@@ -178,7 +182,22 @@ class KeyframeMasks:
             return
         for m in motion_masks(self.edges, poses_w2c, disps, intrinsics, range(lo, hi)):
             self.final.append(m)
+        for (i, j) in [key for key in self.edges if key[0] < hi and abs(key[0] - key[1]) == 1]:
+            self.matches[(i, j)] = self.match_index(i, j)
         self.edges = {key: v for key, v in self.edges.items() if key[0] >= hi}
+
+    def match_index(self, i: int, j: int) -> np.ndarray | None:
+        """(h, w) int16 (int32 on grids over 32767 cells): the flat grid index in keyframe j of each pixel's rounded match p*_ij on the kept
+        edge i → j, −1 where it leaves the grid; None without that edge."""
+        if (i, j) in self.matches:
+            return self.matches[(i, j)]
+        edge = self.edges.get((i, j))
+        if edge is None:
+            return None
+        h, w = self.grid
+        xy = np.rint(edge[0].astype(np.float32)).astype(np.int64)
+        inside = (xy[..., 0] >= 0) & (xy[..., 0] < w) & (xy[..., 1] >= 0) & (xy[..., 1] < h)
+        return np.where(inside, xy[..., 1] * w + xy[..., 0], -1).astype(np.int16 if h * w <= 32767 else np.int32)
 
     def output_masks(self, poses_w2c: Tensor, disps: Tensor, intrinsics: Tensor) -> list[Tensor]:
         """Every keyframe's monocular output mask: :meth:`finalise` on the ones not final yet."""

@@ -177,25 +177,20 @@ def _carry(masks: KeyframeMasks, k: int, prev: np.ndarray | None) -> dict[int, n
     its target p*, the holes closed (3 × 3).  Neither: nothing."""
     if prev is None or not (prev >= 0).any():
         return {}
-    h, w = prev.shape
-    back = masks.edges.get((k, k - 1))
+    back = masks.match_index(k, k - 1)
     if back is not None:  # each pixel of k takes the id at its match in k − 1
-        xy = np.rint(back[0].astype(np.float32)).astype(np.int64)
-        inside = (xy[..., 0] >= 0) & (xy[..., 0] < w) & (xy[..., 1] >= 0) & (xy[..., 1] < h)
-        pulled = np.where(inside, prev[np.clip(xy[..., 1], 0, h - 1), np.clip(xy[..., 0], 0, w - 1)], -1)
+        pulled = np.where(back >= 0, prev.reshape(-1)[np.maximum(back, 0)], -1)
         return {int(t): pulled == t for t in np.unique(pulled[pulled >= 0])}
-    edge = masks.edges.get((k - 1, k))
-    if edge is None:
+    fwd = masks.match_index(k - 1, k)
+    if fwd is None:
         return {}
-    xy = np.rint(edge[0].astype(np.float32)).astype(np.int64)
-    ok = (prev >= 0) & (xy[..., 0] >= 0) & (xy[..., 0] < w) & (xy[..., 1] >= 0) & (xy[..., 1] < h)
+    ok = (prev >= 0) & (fwd >= 0)
     out = {}
     kernel = np.ones((3, 3), np.uint8)
     for tid in np.unique(prev[ok]):  # a handful of objects
-        sel = ok & (prev == tid)
-        m = np.zeros((h, w), np.uint8)
-        m[xy[sel][:, 1], xy[sel][:, 0]] = 1
-        out[int(tid)] = cv2.morphologyEx(m, cv2.MORPH_CLOSE, kernel).astype(bool)
+        m = np.zeros(prev.size, np.uint8)
+        m[fwd[ok & (prev == tid)]] = 1
+        out[int(tid)] = cv2.morphologyEx(m.reshape(prev.shape), cv2.MORPH_CLOSE, kernel).astype(bool)
     return out
 
 
