@@ -152,3 +152,36 @@ def test_export_objects_of_a_run_without_masks_is_an_error(seq, tmp_path, capsys
     assert code == 0
     code, _, err = run(["export", "objects", str(out), "--out", str(tmp_path / "o.json")], capsys)
     assert code == 2 and "dynamics.mode=none" in err and not (tmp_path / "o.json").exists()
+
+
+def test_lazy_depth_reads_the_same_depth_and_checks_sizes_from_the_header(seq, tmp_path):
+    """RGB-D tracking decodes keyframes' depth only (LazyDepth); calling one gives the eager read."""
+    import shutil
+    import warnings
+
+    from droidw_cli.errors import InputError
+    from droidw_cli.io.frames import LazyDepth, png_size
+
+    eager = open_source(seq)
+    lazy = open_source(seq)
+    lazy.lazy_depth = True
+    for a, b in zip(eager, lazy):
+        assert isinstance(b.depth, LazyDepth)
+        np.testing.assert_array_equal(b.depth(), a.depth)
+    first = sorted((seq / "depth").iterdir())[0]
+    assert png_size(first) == (240, 320) and png_size(seq / "calib.txt") is None
+
+    bad = tmp_path / "bad"
+    shutil.copytree(seq, bad)
+    victim = sorted((bad / "depth").iterdir())[5]
+    cv2.imwrite(str(victim), np.zeros((100, 100), np.uint16))
+    source = open_source(bad)
+    source.lazy_depth = True
+    frames = list(source)  # not strict: the mis-sized depth is found when it is read
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert frames[5].depth() is None
+    assert any(victim.name in str(w.message) for w in caught)
+    source.strict_depth = True
+    with pytest.raises(InputError, match="depth image is 100x100"):
+        list(source)  # strict: the header is enough, no decoding

@@ -94,6 +94,9 @@ class CorrespondenceConfig:
     quick_preset: str = "fine"  # the filler's one-way flow keyframe → frame (quick_target)
     fb_thresh: float = 1.0  # forward-backward consistency threshold, full-res px
     photo_sigma: float = 0.1  # photometric agreement scale (intensity in [0, 1])
+    # px at the working resolution: no weight for pixels (or their targets) this close to the
+    # image border, where DIS's flow is biased (correspondence/confidence.py)
+    border_margin: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -81,6 +81,8 @@ class DISCorrespondence(CorrespondenceSource):
             raise ConfigError(f"correspondence.fb_thresh must be > 0, got {cfg.fb_thresh}")
         if not cfg.photo_sigma > 0:
             raise ConfigError(f"correspondence.photo_sigma must be > 0, got {cfg.photo_sigma}")
+        if not cfg.border_margin >= 0:
+            raise ConfigError(f"correspondence.border_margin must be >= 0, got {cfg.border_margin}")
         self.cfg = cfg
         self._local = threading.local()  # this thread's DIS objects (an OpenCV DIS object is not thread-safe)
 
@@ -118,7 +120,7 @@ class DISCorrespondence(CorrespondenceSource):
         return fwd, bwd
 
     def _scored(self, gray_i: np.ndarray, gray_j: np.ndarray, fwd: np.ndarray, bwd: np.ndarray) -> Correspondence:
-        conf = flow_confidence(gray_i, gray_j, fwd, bwd, self.cfg.fb_thresh, self.cfg.photo_sigma)
+        conf = flow_confidence(gray_i, gray_j, fwd, bwd, self.cfg.fb_thresh, self.cfg.photo_sigma, self.cfg.border_margin)
         w = np.clip(area_downsample(conf), 0.0, 1.0)
         target = torch.from_numpy(flow_to_target(fwd))
         weight = torch.from_numpy(np.repeat(w[..., None], 2, axis=-1))

@@ -140,6 +140,38 @@ def decode_depth(path: Path, scale: float) -> np.ndarray | None:
     return (raw.astype(np.float32) / np.float32(scale)).astype(np.float32)
 
 
+def png_size(path: Path) -> tuple[int, int] | None:
+    """(H, W) from a PNG file's header (no decoding); None when it is not a readable PNG."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(24)
+    except OSError:
+        return None
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        return None
+    return int.from_bytes(head[20:24], "big"), int.from_bytes(head[16:20], "big")
+
+
+@dataclass(frozen=True)
+class LazyDepth:
+    """A depth image decoded only when called (RGB-D tracking reads the depth of its keyframes only).
+
+    Calling it gives what an eager read gives: float32 metres, or None (with the same warning)
+    when the file cannot be decoded or its size is not ``size``."""
+
+    path: Path
+    scale: float
+    size: tuple[int, int]
+    index: int
+
+    def __call__(self) -> np.ndarray | None:
+        depth = decode_depth(self.path, self.scale)
+        if depth is None or depth.shape != self.size:
+            warn_corrupt(f"{self.path}: unreadable or mis-sized depth; frame {self.index} kept without depth")
+            return None
+        return depth
+
+
 class FrameSource(ABC):
     """A re-iterable stream of :class:`Frame`.
 

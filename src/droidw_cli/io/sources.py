@@ -26,7 +26,8 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from droidw_cli.errors import InputError
-from droidw_cli.io.frames import IMAGE_SUFFIXES, Frame, FrameSource, Selection, decode_depth, decode_rgb, warn_corrupt
+from droidw_cli.io.frames import (IMAGE_SUFFIXES, Frame, FrameSource, LazyDepth, Selection, decode_depth, decode_rgb,
+                                  png_size, warn_corrupt)
 
 _NUMERIC_STEM = re.compile(r"^\d+(\.\d*)?$")
 _MAX_CONSECUTIVE_READ_FAILURES = 16
@@ -81,6 +82,7 @@ class ListSource(FrameSource):
     depth_scale = 5000.0  # uint16 depth PNG units per metre (TUM / Bonn)
     load_depth = True  # False: skip decoding the depth PNGs (a monocular run does not read them)
     strict_depth = False  # True (RGB-D runs): a depth image whose size differs from its frame is an error
+    lazy_depth = False  # True: Frame.depth is a LazyDepth (decoded when called), its size checked from the PNG header
 
     def __init__(self, path: Path, selection: Selection, fps: float, entries: Sequence[Entry]) -> None:
         super().__init__(path, selection, fps)
@@ -116,7 +118,13 @@ class ListSource(FrameSource):
                              f"{self.size[1]}x{self.size[0]}; frame {k} skipped")
                 continue
             depth = None
-            if entry.depth is not None and self.load_depth:
+            if entry.depth is not None and self.load_depth and self.lazy_depth:
+                shape = png_size(entry.depth)
+                if self.strict_depth and shape is not None and shape != img.shape[:2]:
+                    raise InputError(f"{entry.depth}: depth image is {shape[1]}x{shape[0]}, its frame "
+                                     f"{entry.rgb.name} is {img.shape[1]}x{img.shape[0]}")
+                depth = LazyDepth(entry.depth, self.depth_scale, self.size, k)
+            elif entry.depth is not None and self.load_depth:
                 depth = decode_depth(entry.depth, self.depth_scale)
                 if self.strict_depth and depth is not None and depth.shape != img.shape[:2]:
                     raise InputError(f"{entry.depth}: depth image is {depth.shape[1]}x{depth.shape[0]}, its frame "

@@ -162,6 +162,10 @@ class Tracker:
                 # "features" stage is the time the BA then waits for them
                 feats = None if self.features is None else _Pending(pool.submit(self._extract, image), timer)
                 prior = None
+                if cfg.io.use_depth and callable(depth):  # a LazyDepth: decoded for keyframes only
+                    with timer("decode"):
+                        depth = depth()
+                        depth = None if depth is None else self._preparer.depth(depth)
                 if cfg.io.use_depth and depth is not None:
                     prior = grid_disparity(depth, grid)
                 thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
@@ -221,7 +225,12 @@ class Tracker:
             restore = getattr(source, "load_depth", None)
             if restore is not None:
                 source.load_depth = cfg.io.use_depth
-            items = prefetched(((f, *preparer(f.image, f.depth)) for f in source), cfg.io.prefetch)
+                lazy = getattr(source, "lazy_depth", False)
+                source.lazy_depth = True  # decode and prepare the depth of keyframes only (_first_pass)
+            self._preparer = preparer
+            items = prefetched(((f, preparer.image(f.image), f.depth if callable(f.depth) else
+                                 (None if f.depth is None else preparer.depth(f.depth))) for f in source),
+                               cfg.io.prefetch)
             pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="droidw-features")
             try:
                 self._first_pass(items, fe, mfilter, filler, gba, frames, bar, grid, hw, pool)
@@ -233,6 +242,7 @@ class Tracker:
                 items.close()  # stops the prefetch thread, also after an error
                 if restore is not None:
                     source.load_depth = restore
+                    source.lazy_depth = lazy
             bar.close()
 
             if not frames:
