@@ -145,7 +145,7 @@ class Tracker:
 
     def _first_pass(self, items, fe: Frontend, mfilter: MotionFilter, filler: TrajectoryFiller, gba: GlobalBackend,
                     frames: list[tuple[int, float]], bar, grid: tuple[int, int], hw: tuple[int, int],
-                    pool: ThreadPoolExecutor) -> None:
+                    pool: ThreadPoolExecutor, preparer: FramePreparer) -> None:
         """Motion filter, keyframes and the frontend; every other frame goes to the filler."""
         cfg, timer, s = self.cfg, self.timer, self.cfg.io.thumbnail_scale
         while True:
@@ -165,7 +165,7 @@ class Tracker:
                 if cfg.io.use_depth and callable(depth):  # a LazyDepth: decoded for keyframes only
                     with timer("decode"):
                         depth = depth()
-                        depth = None if depth is None else self._preparer.depth(depth)
+                        depth = None if depth is None else preparer.depth(depth)
                 if cfg.io.use_depth and depth is not None:
                     prior = grid_disparity(depth, grid)
                 thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
@@ -227,13 +227,12 @@ class Tracker:
                 source.load_depth = cfg.io.use_depth
                 lazy = getattr(source, "lazy_depth", False)
                 source.lazy_depth = True  # decode and prepare the depth of keyframes only (_first_pass)
-            self._preparer = preparer
             items = prefetched(((f, preparer.image(f.image), f.depth if callable(f.depth) else
                                  (None if f.depth is None else preparer.depth(f.depth))) for f in source),
                                cfg.io.prefetch)
             pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="droidw-features")
             try:
-                self._first_pass(items, fe, mfilter, filler, gba, frames, bar, grid, hw, pool)
+                self._first_pass(items, fe, mfilter, filler, gba, frames, bar, grid, hw, pool, preparer)
             except BaseException:
                 filler.close()  # stops the filler's flow worker
                 raise
