@@ -201,3 +201,34 @@ def test_match_all_on_threads_equals_one_after_the_other():
             assert np.array_equal(ca.flow, cb.flow) and torch.equal(ca.weight, cb.weight) and da == db
     with pytest.raises(ValueError):
         par.match_all([calls[0], MatchCall(img_i, img_i[:, :W - 8])])
+
+
+def test_staged_jobs_give_what_match_and_match_pair_give():
+    """match_all runs each call as two flow jobs and one scoring job per correspondence: same results."""
+    from droidw_cli.correspondence.base import MatchCall
+
+    img_i = texture(H, W, 11)
+    img_j = warp(img_i, np.float32([[1, 0, 4.0], [0, 1, -2.0]]))
+    init = np.full((H, W, 2), 3.0, np.float32)
+    dis = DISCorrespondence()
+    pair, single = dis.match_all([MatchCall(img_i, img_j, init, both=True), MatchCall(img_j, img_i)])
+    ref_pair = dis.match_pair(img_i, img_j, init)
+    ref_single = dis.match(img_j, img_i)
+    for (c, derived), ref in zip(pair + single, list(ref_pair) + [ref_single]):
+        assert derived is None
+        assert np.array_equal(c.flow, ref.flow) and torch.equal(c.target, ref.target) and torch.equal(c.weight, ref.weight)
+
+
+def test_an_error_in_a_worker_job_reaches_the_caller():
+    """A job that fails on any thread raises from match_all after the other jobs have stopped."""
+    from droidw_cli.correspondence.base import MatchCall
+
+    img = texture(H, W, 3)
+    calls = [MatchCall(img, warp(img, np.float32([[1, 0, k], [0, 1, 0]]))) for k in range(4)]
+    def derive(c):
+        if c.mean_flow > 2.5:  # the 3 px shift only
+            raise RuntimeError("derive failed")
+        return 0
+
+    with pytest.raises(RuntimeError, match="derive failed"):
+        DISCorrespondence().match_all(calls, derive)

@@ -11,6 +11,7 @@ the ``droidw.correspondence`` entry-point group).
 from __future__ import annotations
 
 import os
+import threading
 from abc import ABC, abstractmethod
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
@@ -109,36 +110,91 @@ class CorrespondenceSource(ABC):
         """
         return self.match(image_i, image_j).mean_flow
 
+    def stages(self, call: MatchCall) -> tuple[list[Callable[[], Any]], Callable[[list[Any]], list[Callable[[], Correspondence]]]]:
+        """A call split for :meth:`match_all`: independent first-stage jobs (e.g. one per flow
+        direction), and from their results, in order, one job per correspondence the call makes.
+
+        The default has one first-stage job (the whole :meth:`match` or :meth:`match_pair`) and
+        second-stage jobs that only hand its correspondences on.
+        """
+        def whole() -> tuple[Correspondence, ...]:
+            if call.both:
+                return self.match_pair(call.image_i, call.image_j, call.init_flow)
+            return (self.match(call.image_i, call.image_j, call.init_flow),)
+
+        def finish(outs: list[Any]) -> list[Callable[[], Correspondence]]:
+            return [lambda c=c: c for c in outs[0]]
+        return [whole], finish
+
     def match_all(self, calls: Sequence[MatchCall], derive: Callable[[Correspondence], Any] | None = None
                   ) -> list[list[tuple[Correspondence, Any]]]:
         """Several :meth:`match` / :meth:`match_pair` calls; per call, its correspondences with ``derive`` of each.
 
-        ``derive`` (optional) runs beside the call that made the correspondence
+        ``derive`` (optional) runs beside the job that made the correspondence
         (for per-edge maps such as the epipolar distances), None otherwise.
-        With ``concurrent_match`` the calls go to a pool of worker threads, the
-        first on the calling thread, as many at once as there are usable cores;
-        the results come back in the order of ``calls`` either way, the same as
+        Each call is split by :meth:`stages`; with ``concurrent_match`` the
+        jobs of each stage are pulled from one queue by the calling thread and
+        a pool of worker threads, as many at once as there are usable cores
+        (a keyframe's three forward-backward pairs are six flows, three per
+        core, rather than one pair on one core and two on the other).  The
+        results come back in the order of ``calls`` either way, the same as
         one after the other.
         """
+        split = [self.stages(c) for c in calls]
+        first = self._run_jobs([job for jobs, _ in split for job in jobs])
+        second, counts, at = [], [], 0
+        for jobs, finish in split:
+            made = finish(first[at:at + len(jobs)])
+            at += len(jobs)
+            counts.append(len(made))
+            second += [(lambda make=make: self._derived(make(), derive)) for make in made]
+        results = self._run_jobs(second)
+        out, at = [], 0
+        for n in counts:
+            out.append(results[at:at + n])
+            at += n
+        return out
 
-        def run(call: MatchCall) -> list[tuple[Correspondence, Any]]:
-            out = (self.match_pair(call.image_i, call.image_j, call.init_flow) if call.both
-                   else (self.match(call.image_i, call.image_j, call.init_flow),))
-            return [(c, None if derive is None else derive(c)) for c in out]
+    @staticmethod
+    def _derived(c: Correspondence, derive: Callable[[Correspondence], Any] | None) -> tuple[Correspondence, Any]:
+        return c, None if derive is None else derive(c)
 
-        workers = min(len(calls), _usable_cores())
+    def _run_jobs(self, jobs: list[Callable[[], Any]]) -> list[Any]:
+        """Run the jobs (on the calling thread and, with ``concurrent_match``, workers); results in order.
+
+        Which thread runs which job varies from run to run; the results do not
+        (each job depends on its inputs only).  The first error is raised once
+        every job has finished or been skipped.
+        """
+        workers = min(len(jobs), _usable_cores())
         if not self.concurrent_match or workers < 2:
-            return [run(c) for c in calls]
+            return [job() for job in jobs]
         size, pool = getattr(self, "_match_pool", (0, None))
         if size < workers - 1:
             size, pool = workers - 1, ThreadPoolExecutor(workers - 1, thread_name_prefix="droidw-match")
             self._match_pool = (size, pool)
-        jobs = [pool.submit(run, c) for c in calls[1:]]
-        try:
-            first = run(calls[0])
-        finally:
-            wait(jobs)  # every job has finished when this returns or raises
-        return [first] + [j.result() for j in jobs]
+        results: list[Any] = [None] * len(jobs)
+        errors: list[BaseException] = []
+        queue = iter(range(len(jobs)))
+        lock = threading.Lock()
+
+        def drain() -> None:
+            while not errors:
+                with lock:
+                    n = next(queue, None)
+                if n is None:
+                    return
+                try:
+                    results[n] = jobs[n]()
+                except BaseException as e:  # re-raised on the calling thread below
+                    errors.append(e)
+
+        helpers = [pool.submit(drain) for _ in range(workers - 1)]
+        drain()
+        wait(helpers)  # every job has finished when this returns or raises
+        if errors:
+            raise errors[0]
+        return results
 
     def match_many(
         self,

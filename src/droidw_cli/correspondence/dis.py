@@ -140,6 +140,22 @@ class DISCorrespondence(CorrespondenceSource):
         fwd, bwd = self._flows(gray_i, gray_j, init)
         return self._scored(gray_i, gray_j, fwd, bwd), self._scored(gray_j, gray_i, bwd, fwd)
 
+    def stages(self, call):
+        """Forward and backward flow as two jobs, then the scoring of each correspondence (see
+        :meth:`CorrespondenceSource.stages`); the same results as :meth:`match` / :meth:`match_pair`."""
+        init = self._check(call.image_i, call.image_j, call.init_flow)
+        gray_i, gray_j = to_gray(call.image_i), to_gray(call.image_j)
+        back = None if init is None else invert_flow(init)
+        jobs = [lambda: self.flow(gray_i, gray_j, init), lambda: self.flow(gray_j, gray_i, back)]
+
+        def finish(outs):
+            fwd, bwd = outs
+            made = [lambda: self._scored(gray_i, gray_j, fwd, bwd)]
+            if call.both:
+                made.append(lambda: self._scored(gray_j, gray_i, bwd, fwd))
+            return made
+        return jobs, finish
+
     def quick_target(self, image_i: np.ndarray, image_j: np.ndarray) -> torch.Tensor:
         """Target i → j from one DIS flow (``quick_preset``) at the working resolution (no confidence)."""
         self._check(image_i, image_j, None)
