@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from droidw_cli.config import CorrespondenceConfig
-from droidw_cli.correspondence.base import Correspondence, CorrespondenceSource
+from droidw_cli.correspondence.base import Correspondence, CorrespondenceSource, MatchCall
 from droidw_cli.correspondence.confidence import flow_confidence, invert_flow
 from droidw_cli.correspondence.grid import area_downsample, flow_to_target, validate_flow, validate_image
 from droidw_cli.errors import ConfigError
@@ -114,11 +114,6 @@ class DISCorrespondence(CorrespondenceSource):
             raise ValueError(f"image_i and image_j differ in shape: {image_i.shape} vs {image_j.shape}")
         return None if init_flow is None else validate_flow(init_flow, image_i.shape[:2])
 
-    def _flows(self, gray_i: np.ndarray, gray_j: np.ndarray, init: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        fwd = self.flow(gray_i, gray_j, init)
-        bwd = self.flow(gray_j, gray_i, None if init is None else invert_flow(init))
-        return fwd, bwd
-
     def _scored(self, gray_i: np.ndarray, gray_j: np.ndarray, fwd: np.ndarray, bwd: np.ndarray) -> Correspondence:
         conf = flow_confidence(gray_i, gray_j, fwd, bwd, self.cfg.fb_thresh, self.cfg.photo_sigma, self.cfg.border_margin)
         w = np.clip(area_downsample(conf), 0.0, 1.0)
@@ -127,22 +122,21 @@ class DISCorrespondence(CorrespondenceSource):
         return Correspondence(flow=fwd, target=target, weight=weight)
 
     def match(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None = None) -> Correspondence:
-        init = self._check(image_i, image_j, init_flow)
-        gray_i, gray_j = to_gray(image_i), to_gray(image_j)
-        fwd, bwd = self._flows(gray_i, gray_j, init)
-        return self._scored(gray_i, gray_j, fwd, bwd)
+        return self._one_after_the_other(MatchCall(image_i, image_j, init_flow))[0]
 
     def match_pair(self, image_i: np.ndarray, image_j: np.ndarray,
                    init_flow: np.ndarray | None = None) -> tuple[Correspondence, Correspondence]:
         """i → j and j → i from one forward-backward DIS pair (half the flow of two ``match`` calls)."""
-        init = self._check(image_i, image_j, init_flow)
-        gray_i, gray_j = to_gray(image_i), to_gray(image_j)
-        fwd, bwd = self._flows(gray_i, gray_j, init)
-        return self._scored(gray_i, gray_j, fwd, bwd), self._scored(gray_j, gray_i, bwd, fwd)
+        forward, backward = self._one_after_the_other(MatchCall(image_i, image_j, init_flow, both=True))
+        return forward, backward
+
+    def _one_after_the_other(self, call: MatchCall) -> list[Correspondence]:
+        jobs, finish = self.stages(call)
+        return [make() for make in finish([job() for job in jobs])]
 
     def stages(self, call):
-        """Forward and backward flow as two jobs, then the scoring of each correspondence (see
-        :meth:`CorrespondenceSource.stages`); the same results as :meth:`match` / :meth:`match_pair`."""
+        """Forward and backward flow as two jobs (the backward one started from the inverse of
+        ``init_flow``), then the scoring of each correspondence (:meth:`CorrespondenceSource.stages`)."""
         init = self._check(call.image_i, call.image_j, call.init_flow)
         gray_i, gray_j = to_gray(call.image_i), to_gray(call.image_j)
         back = None if init is None else invert_flow(init)
