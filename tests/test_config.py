@@ -32,6 +32,7 @@ def test_overrides_and_types():
     assert cfg.frontend.window == 30
     assert cfg.uncertainty.enable is False and cfg.ba.uncertainty.enable is False
     assert isinstance(cfg.ba.gamma_depth, float) and cfg.ba.gamma_depth == 1.0
+    assert load_config("default", ["ba.gamma_depth=1e-3"]).ba.gamma_depth == 0.001  # YAML 1.1 reads it as text
     assert parse_overrides(["a.b.c=1.5", "a.d=x"]) == {"a": {"b": {"c": 1.5}, "d": "x"}}
 
 
@@ -47,6 +48,7 @@ def test_unknown_key_names_key_and_file(tmp_path):
 
 @pytest.mark.parametrize("override, message", [
     ("frontend.window=abc", "must be an integer"),
+    ("ba.gamma_depth=abc", "must be a number"),
     ("uncertainty.enable=3", "true or false"),
     ("uncertainty.mode=bogus", "uncertainty.mode"),
     ("frontend", "expected key.sub=value"),

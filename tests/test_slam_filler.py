@@ -163,3 +163,26 @@ def test_flows_computed_ahead_give_the_same_poses(walk):
     assert set(ahead) == set(sync)
     for k in ahead:
         assert torch.equal(ahead[k], sync[k]), k
+
+
+def test_a_refined_pose_may_leave_the_interpolation_only_by_a_share_of_the_baseline(walk):
+    """filler.max_departure bounds how far a refined camera centre may leave the interpolated one."""
+    frames, _ = walk
+
+    def centres(*overrides):
+        fe, _ = _frontend(walk, [A, B])
+        filler = TrajectoryFiller(fe, load_config("default", list(overrides)).filler)
+        for k in range(A + 1, B):
+            filler.add_frame(k, k / 30.0, A, frames[k][0])
+        poses = filler.finish()
+        return torch.stack([_centre(poses[k]) for k in range(A + 1, B)])
+
+    interpolated = centres("filler.iters=0")
+    free = centres("filler.max_departure=0")
+    tight = centres("filler.max_departure=0.000001")
+    baseline = float((_centre(frames[B][2]) - _centre(frames[A][2])).norm())
+    assert torch.allclose(tight, interpolated, atol=1e-6)
+    assert float((free - interpolated).norm(dim=1).max()) > 0.01 * baseline  # the refinement moved some frames
+    bounded = centres("filler.max_departure=0.02")
+    departure = (bounded - interpolated).norm(dim=1)
+    assert float(departure.max()) <= 0.02 * baseline + 1e-6

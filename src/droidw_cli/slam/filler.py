@@ -342,5 +342,12 @@ class TrajectoryFiller:
             state = fe.backend.ba_step(state, edges, params).state
         final = robust_cost(*residual(state))
         # model selection: keep the interpolation unless the flow explains the refined pose clearly better
-        better = (final < self.cfg.min_gain * start)[:, None]
-        return torch.where(better, state.poses[na:], init)
+        better = final < self.cfg.min_gain * start
+        if self.cfg.max_departure > 0 and na == 2:
+            # a refined camera centre that leaves the interpolated one by more than a share of the
+            # gap's keyframe baseline is a failed refinement, not the camera's motion
+            centres = invert(state.poses)[:, :3]
+            baseline = (centres[1] - centres[0]).norm()
+            departure = (invert(state.poses[na:])[:, :3] - invert(init)[:, :3]).norm(dim=1)
+            better &= departure <= self.cfg.max_departure * baseline
+        return torch.where(better[:, None], state.poses[na:], init)
