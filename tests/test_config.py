@@ -49,6 +49,7 @@ def test_unknown_key_names_key_and_file(tmp_path):
 @pytest.mark.parametrize("override, message", [
     ("frontend.window=abc", "must be an integer"),
     ("ba.gamma_depth=abc", "must be a number"),
+    ("ba.gamma_depth=nan", "must be a number"),
     ("uncertainty.enable=3", "true or false"),
     ("uncertainty.mode=bogus", "uncertainty.mode"),
     ("frontend", "expected key.sub=value"),

@@ -10,6 +10,8 @@ An unknown key is an error naming the key and the file it came from.
 
 from __future__ import annotations
 
+import math
+
 import dataclasses
 import types
 import typing
@@ -331,9 +333,11 @@ def _coerce(value: Any, tp: Any, key: str, source: str) -> Any:
             return float(value)
         if isinstance(value, str):  # YAML 1.1 reads "1e-6" (no dot) as a string
             try:
-                return float(value)
+                number = float(value)
             except ValueError:
-                pass
+                number = float("nan")
+            if math.isfinite(number):  # not "nan" / "inf" spelt out
+                return number
         raise ConfigError(f"{source}: {key} must be a number, got {value!r}")
     if tp is int:
         if isinstance(value, int) and not isinstance(value, bool):
