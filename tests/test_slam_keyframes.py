@@ -80,6 +80,27 @@ def test_fixed_camera_makes_no_keyframe_before_initialisation():
     assert not any(mf.check(img.copy(), False)[0] for _ in range(20))  # no max_gap before initialisation
 
 
+def test_near_still_camera_gets_keyframes_every_max_gap_before_initialisation():
+    """Before initialisation a whole-image shift of 1 grid px (8 working px, under the 3-px median test)
+    becomes a keyframe candidate once max_gap frames have passed; a mover filling 60 % of a fixed
+    camera's view (its median moves, its lower quartile does not) never does."""
+    big = _textured()
+    ref = np.ascontiguousarray(big[:384, 32:544])
+    shifted = np.ascontiguousarray(big[:384, 24:536])  # every pixel 8 px = 1 grid px
+    mover = ref.copy()
+    mover[:, :308] = big[:384, 24:332]  # the left 60 % moved by 8 px, the rest still
+    for frame, expected in ((shifted, True), (mover, False)):
+        mf = MotionFilter(MotionFilterConfig(max_gap=5))
+        mf.check(ref, False)
+        mf.accept(ref)
+        decisions = [mf.check(frame.copy(), False)[0] for _ in range(6)]
+        assert decisions == [False] * 4 + [expected] * 2
+    off = MotionFilter(MotionFilterConfig(max_gap=5, init_min_quartile=0.0))
+    off.check(ref, False)
+    off.accept(ref)
+    assert not any(off.check(shifted.copy(), False)[0] for _ in range(8))
+
+
 def test_parallax_is_small_for_a_rotation_and_large_for_a_translation():
     """Rendered room: rotating the camera about its centre gives no parallax, moving it sideways does."""
     from droidw_cli.synth import SynthConfig, build_scene

@@ -2,9 +2,12 @@
 
 A frame is a candidate when the mean optical flow from the last keyframe is
 at least ``thresh`` pixels of the 1/8 BA grid (DROID's unit: 3 grid px is
-24 px at a 384×512 working size), or when ``max_gap`` frames have passed.  Before initialisation the test uses the *median* flow and no
-forced keyframes, so a fixed camera watching movers (whose pixels are a
-minority) never produces a map from people walking by.
+24 px at a 384×512 working size), or when ``max_gap`` frames have passed.  Before initialisation the test uses the *median* flow,
+so a fixed camera watching movers (whose pixels are a minority) never produces
+a map from people walking by; after ``max_gap`` frames it is enough that the
+lower quartile of the flow reaches ``init_min_quartile`` grid px: three
+quarters of the image moved, which a near-still camera that wobbles does and
+a fixed camera does not, however close its movers come.
 
 The flow here is a cheap DIS FAST estimate on a half-size grey image (ULTRAFAST
 at 1/4 size reads 1-5 px of spurious mean flow on a fixed camera watching
@@ -36,6 +39,7 @@ class FlowStats:
 
     mean: float
     median: float
+    quartile: float = float("nan")  # the lower quartile, when asked for
 
 
 class MotionFilter:
@@ -48,10 +52,13 @@ class MotionFilter:
         self._checked: tuple[np.ndarray, np.ndarray] | None = None  # (image, its small grey) of the last check
         self._since = 0
 
-    def flow_stats(self, grey_a: np.ndarray, grey_b: np.ndarray) -> FlowStats:
+    def flow_stats(self, grey_a: np.ndarray, grey_b: np.ndarray, quartile: bool = False) -> FlowStats:
         flow = self._dis.calc(grey_a, grey_b, None)
         mag = cv2.magnitude(flow[..., 0], flow[..., 1]) * (_SCALE / BA_SCALE)  # np.linalg.norm: 15× slower
-        return FlowStats(float(mag.mean()), float(np.median(mag)))
+        if not quartile:
+            return FlowStats(float(mag.mean()), float(np.median(mag)))
+        low, median = np.percentile(mag, [25, 50])
+        return FlowStats(float(mag.mean()), float(median), float(low))
 
     def check(self, image: np.ndarray, initialised: bool) -> tuple[bool, FlowStats]:
         """Is this frame a keyframe candidate?  The first frame always is."""
@@ -60,11 +67,13 @@ class MotionFilter:
         if self._last is None:
             return True, FlowStats(0.0, 0.0)
         self._since += 1
-        stats = self.flow_stats(self._last, grey)
+        floor = self.cfg.init_min_quartile
+        waited = not initialised and floor > 0 and self._since >= self.cfg.max_gap
+        stats = self.flow_stats(self._last, grey, quartile=waited)
         if initialised:
             ok = stats.mean >= self.cfg.thresh or self._since >= self.cfg.max_gap
         else:
-            ok = stats.median >= self.cfg.thresh
+            ok = stats.median >= self.cfg.thresh or (waited and stats.quartile >= floor)
         return ok, stats
 
     def accept(self, image: np.ndarray) -> None:
