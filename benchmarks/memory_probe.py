@@ -83,6 +83,8 @@ def account(fe, gba, filler) -> dict[str, int]:
         "fe.cache": nbytes(fe.cache.targets),
         "fe._raw+_epipolar": nbytes([fe._raw, fe._epipolar]),
         "masks": nbytes([m.images, m.masks, m.current]),
+        "masks.edges": nbytes(getattr(m, "edges", None)),
+        "masks.final+matches": nbytes([getattr(m, "final", None), getattr(m, "matches", None)]),
         "gba.images": gba.images.nbytes,
         "filler.pending": nbytes(filler._pending),
         "filler.relative": getattr(filler._relative, "nbytes", None) or nbytes(filler._relative),
@@ -130,6 +132,19 @@ def main() -> None:
             seen["kf"] += 1
             if seen["kf"] % args.every == 0:
                 report(f"kf{seen['kf']}", self.fe, self, ProbedBackend.filler)
+
+        def run(self, iters):
+            # which stretch set each new peak: the tracking since the last global BA, or a global BA itself
+            before = hwm_mb(reset=True)
+            edges_before = len(self.fe.cache)
+            out = super().run(iters)
+            during = hwm_mb(reset=True)
+            for what, value in (("tracking", before), ("global BA", during)):
+                if value > seen.get("max", 0.0):
+                    seen["max"] = value
+                    print(f"new peak {value:.0f} MB in {what} at keyframe {len(self.fe.buffer)} "
+                          f"(edges {edges_before} -> {len(self.fe.cache)}, problem from {self.lo})", flush=True)
+            return out
 
         def finish(self):
             report("before_final", self.fe, self, ProbedBackend.filler)

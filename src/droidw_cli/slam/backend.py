@@ -18,7 +18,8 @@ every ``every`` new keyframes during tracking (``periodic_iters``
 iterations), and once at the end (``iters``).
 
 The images of the keyframes in the problem are kept JPEG-encoded at the
-working resolution (``image_quality``), about a tenth of their raw size.
+working resolution (``image_quality``), about a tenth of their raw size, and
+each run first hands the heap's free pages back (:mod:`droidw_cli.slam.heap`).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from droidw_cli.io.jpeg import decode_rgb, encode_rgb
 from droidw_cli.slam import graph
 from droidw_cli.slam.distance import frame_distance
 from droidw_cli.slam.frontend import Frontend
+from droidw_cli.slam.heap import release_free_memory
 from droidw_cli.slam.optimizer import run_window
 
 #: the candidates' frame distance is averaged over every DISTANCE_STRIDE-th grid pixel
@@ -127,6 +129,7 @@ class GlobalBackend:
             fe.drop_before(lo)
             self.lo = lo
         self.images.keep(set(fe.buffer.frame_index[lo:n]))
+        release_free_memory()  # the run's temporaries start from what is live, not from old holes (heap.py)
         pairs = self._proximity(lo, n)
         if pairs:
             frames = {k for p in pairs for k in p}
