@@ -51,7 +51,7 @@ def test_pure_rotation_flags_any_residual_motion():
 
 
 def test_keyframe_mask_keeps_blobs_and_drops_thin_lines():
-    p = MotionParams()
+    p = MotionParams(min_seed=0)  # every unconfident blob counts (the support test is below)
     weights = np.ones((2, H, W))
     weights[:, 4:12, 4:10] = 0.0  # a mover with no confident flow on any edge
     weights[:, 18, :] = 0.0  # an occlusion edge: one cell thick
@@ -133,3 +133,17 @@ def test_finalise_turns_the_edges_of_settled_keyframes_into_masks_and_drops_them
     for a, b in zip(out, expected):
         assert torch.equal(a, b)
     assert out[0][8:16, 10:18].float().mean() > 0.8
+
+
+def test_unconfident_cells_join_the_mask_only_where_the_geometry_sees_motion():
+    """An unconfident blob with a few cells that move across their epipolar lines is a mover, kept whole;
+    one without (blur, a textureless wall) is not; min_seed 0 keeps both."""
+    weights = np.ones((2, H, W))
+    weights[:, 4:12, 4:10] = 0.0  # a mover: no confident flow ...
+    scores = np.zeros((2, H, W))
+    scores[0, 9:12, 6:9] = 3.0  # ... except a few cells, which the geometry rejects
+    weights[:, 16:22, 20:28] = 0.0  # static but unconfident
+    mask = keyframe_mask(scores, weights, MotionParams())
+    assert mask[4:12, 4:10].all()
+    assert not mask[16:22, 20:28].any()
+    assert keyframe_mask(scores, weights, MotionParams(min_seed=0))[16:22, 20:28].all()
