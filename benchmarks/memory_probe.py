@@ -17,7 +17,6 @@ to tracemalloc, hence the explicit accounting.
 from __future__ import annotations
 
 import argparse
-import ctypes
 import resource
 import sys
 import time
@@ -29,12 +28,12 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _bench_common import track_source  # noqa: E402
 
-_LIBC = ctypes.CDLL("libc.so.6")
-
 
 def rss_mb(trim: bool = False) -> float:
     if trim:
-        _LIBC.malloc_trim(0)
+        from droidw_cli.slam.heap import release_free_memory
+
+        release_free_memory()
     with open("/proc/self/statm") as f:
         return int(f.read().split()[1]) * resource.getpagesize() / 2**20
 
