@@ -10,9 +10,8 @@ An unknown key is an error naming the key and the file it came from.
 
 from __future__ import annotations
 
-import math
-
 import dataclasses
+import math
 import types
 import typing
 from dataclasses import dataclass, field
@@ -345,7 +344,7 @@ def _coerce(value: Any, tp: Any, key: str, source: str) -> Any:
             try:
                 number = float(value)
             except ValueError:
-                number = float("nan")
+                number = math.nan
             if math.isfinite(number):  # not "nan" / "inf" spelt out
                 return number
         raise ConfigError(f"{source}: {key} must be a number, got {value!r}")
