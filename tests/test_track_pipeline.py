@@ -100,3 +100,26 @@ def test_user_errors_exit_2_without_output(tmp_path, static_seq, capsys):
     assert not (tmp_path / "o2" / "traj.txt").exists()
     assert _track([str(static_seq), "--set", "frontend.windw=3", "--out", str(tmp_path / "o3")]) == 2
     assert "frontend.windw" in capsys.readouterr().err
+
+
+def test_matching_ahead_changes_nothing_but_the_timing(static_seq, static_run, tmp_path, monkeypatch):
+    """Each new keyframe's pair to the previous one is matched on another thread (slam/scout.py),
+    and taken from there: the trajectory is the same bytes as with every match on the main thread."""
+    from droidw_cli.slam.scout import Scout
+
+    used = []
+    matched = Scout.matched
+
+    def counted(self, i, j):
+        result = matched(self, i, j)
+        used.append(result is not None)
+        return result
+
+    monkeypatch.setattr(Scout, "matched", counted)
+    ahead = _run(static_seq, tmp_path / "ahead", "--set", "uncertainty.enable=false")
+    assert sum(used) >= 2
+    assert (ahead / "traj.txt").read_bytes() == (static_run / "traj.txt").read_bytes()
+    used.clear()
+    off = _run(static_seq, tmp_path / "off", "--set", "uncertainty.enable=false", "--set", "frontend.match_ahead=false")
+    assert not used
+    assert (off / "traj.txt").read_bytes() == (static_run / "traj.txt").read_bytes()

@@ -126,8 +126,8 @@ class CorrespondenceSource(ABC):
             return [lambda c=c: c for c in outs[0]]
         return [whole], finish
 
-    def match_all(self, calls: Sequence[MatchCall], derive: Callable[[Correspondence], Any] | None = None
-                  ) -> list[list[tuple[Correspondence, Any]]]:
+    def match_all(self, calls: Sequence[MatchCall], derive: Callable[[Correspondence], Any] | None = None,
+                  serial: bool = False) -> list[list[tuple[Correspondence, Any]]]:
         """Several :meth:`match` / :meth:`match_pair` calls; per call, its correspondences with ``derive`` of each.
 
         ``derive`` (optional) runs beside the job that made the correspondence
@@ -138,17 +138,18 @@ class CorrespondenceSource(ABC):
         (a keyframe's three forward-backward pairs are six flows, three per
         core, rather than one pair on one core and two on the other).  The
         results come back in the order of ``calls`` either way, the same as
-        one after the other.
+        one after the other.  ``serial``: every job on the calling thread (a
+        caller that is itself a background thread).
         """
         split = [self.stages(c) for c in calls]
-        first = self._run_jobs([job for jobs, _ in split for job in jobs])
+        first = self._run_jobs([job for jobs, _ in split for job in jobs], serial)
         second, counts, at = [], [], 0
         for jobs, finish in split:
             made = finish(first[at:at + len(jobs)])
             at += len(jobs)
             counts.append(len(made))
             second += [(lambda make=make: self._derived(make(), derive)) for make in made]
-        results = self._run_jobs(second)
+        results = self._run_jobs(second, serial)
         out, at = [], 0
         for n in counts:
             out.append(results[at:at + n])
@@ -159,7 +160,7 @@ class CorrespondenceSource(ABC):
     def _derived(c: Correspondence, derive: Callable[[Correspondence], Any] | None) -> tuple[Correspondence, Any]:
         return c, None if derive is None else derive(c)
 
-    def _run_jobs(self, jobs: list[Callable[[], Any]]) -> list[Any]:
+    def _run_jobs(self, jobs: list[Callable[[], Any]], serial: bool = False) -> list[Any]:
         """Run the jobs (on the calling thread and, with ``concurrent_match``, workers); results in order.
 
         Which thread runs which job varies from run to run; the results do not
@@ -167,7 +168,7 @@ class CorrespondenceSource(ABC):
         every job has finished or been skipped.
         """
         workers = min(len(jobs), _usable_cores())
-        if not self.concurrent_match or workers < 2:
+        if serial or not self.concurrent_match or workers < 2:
             return [job() for job in jobs]
         size, pool = getattr(self, "_match_pool", (0, None))
         if size < workers - 1:

@@ -39,7 +39,10 @@ and each edge's target and confidence are copied to the device once, when
 they are cached.  The new edges of a keyframe are matched, each with its
 epipolar distance map, in one
 :meth:`~droidw_cli.correspondence.base.CorrespondenceSource.match_all` call,
-on as many threads as there are cores when the source allows it.
+on as many threads as there are cores when the source allows it; the pair
+(k, k − 1), which needs no initial flow, usually comes ready from the scout
+(:mod:`droidw_cli.slam.scout`), which matched it on another thread during
+the previous keyframe's BA.
 """
 
 from __future__ import annotations
@@ -149,6 +152,9 @@ class Frontend:
         self.images: dict[int, np.ndarray] = {}
         self.initialised = False
         self.on_remove = None  # called with a keyframe's index just before keyframe removal drops it
+        # early matches of adjacent pairs made on another thread (slam/scout.py's Scout: matched(frame i,
+        # frame j) → match_adjacent's result or None, hold() while this frontend matches, release() after)
+        self.early = None
         # epipolar motion segmentation: (Sampson distance map, raw confidence) of the window's edges.
         # Not while the focal length is estimated: on lady-running with --calib auto the masks
         # flagged 27-41 % of the view (not only the runner) and the estimated fx fell from
@@ -208,15 +214,43 @@ class Frontend:
             if (i, j) in done:
                 continue
             both = (j, i) in first and (j, i) not in done  # both directions from one forward-backward pair
+            early = self._matched_early(i, j) if both and f0 is None else None
+            if early is not None:
+                for key, (c, epipolar) in zip([(i, j), (j, i)], early):
+                    self._store(key, c, epipolar)
+                done.update([(i, j), (j, i)])
+                continue
             calls.append(MatchCall(images[i], images[j], f0, both))
             keys.append([(i, j), (j, i)] if both else [(i, j)])
             done.update(keys[-1])
         derive = _epipolar_of if self._segmenting else None  # on the flow's thread too
-        for ks, results in zip(keys, self.correspondence.match_all(calls, derive)):
+        if self.early is not None:
+            self.early.hold()  # both cores match here: no early match beside them
+        try:
+            matched = self.correspondence.match_all(calls, derive) if calls else []
+        finally:
+            if self.early is not None:
+                self.early.release()  # the BA that follows leaves a core to them
+        for ks, results in zip(keys, matched):
             for key, (c, epipolar) in zip(ks, results):
                 self._store(key, c, epipolar)
         if self._masking:
             self._mask_movers({i for i, _ in todo})
+
+    def match_adjacent(self, image_i: np.ndarray, image_j: np.ndarray, source=None) -> list[tuple[Correspondence, object]]:
+        """The pair (i, j), (j, i) as :meth:`_match` makes it without an initial flow (with the epipolar
+        maps when segmenting), every job on the calling thread, so that another thread may ask for it
+        (:mod:`droidw_cli.slam.scout`); ``source``: the correspondence source to use (default: the frontend's)."""
+        derive = _epipolar_of if self._segmenting else None
+        source = self.correspondence if source is None else source
+        return source.match_all([MatchCall(image_i, image_j, None, True)], derive, serial=True)[0]
+
+    def _matched_early(self, i: int, j: int) -> list[tuple[Correspondence, object]] | None:
+        """The pair (i, j), (j, i) as :meth:`match_adjacent` made it on another thread (``self.early``),
+        when it did."""
+        if self.early is None:
+            return None
+        return self.early.matched(self.buffer.frame_index[i], self.buffer.frame_index[j])
 
     def _store(self, key: tuple[int, int], c, epipolar: np.ndarray | None) -> None:
         self.cache.put(*key, c.target, c.weight, born=self.shared.iterations)

@@ -36,6 +36,7 @@ from droidw_cli.slam.backend import GlobalBackend
 from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.frontend import Frontend, grid_disparity
 from droidw_cli.slam.motion_filter import MotionFilter
+from droidw_cli.slam.scout import Scout
 from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.timing import StageTimer, Timed
 
@@ -143,20 +144,18 @@ class Tracker:
         self.progress = progress
         self.timer = StageTimer()
 
-    def _first_pass(self, items, fe: Frontend, mfilter: MotionFilter, filler: TrajectoryFiller, gba: GlobalBackend,
+    def _first_pass(self, items, fe: Frontend, scout: Scout, filler: TrajectoryFiller, gba: GlobalBackend,
                     frames: list[tuple[int, float]], bar, grid: tuple[int, int], hw: tuple[int, int],
                     pool: ThreadPoolExecutor, preparer: FramePreparer) -> None:
-        """Motion filter, keyframes and the frontend; every other frame goes to the filler."""
+        """Keyframes (the candidates the scout flagged) into the frontend; every other frame goes to the filler."""
         cfg, timer, s = self.cfg, self.timer, self.cfg.io.thumbnail_scale
         while True:
             with timer("decode"):  # the wait for the prefetch thread
                 item = next(items, None)
             if item is None:
                 return
-            frame, image, depth = item
+            frame, image, depth, is_kf = item  # the motion filter ran on the prefetch thread (slam/scout.py)
             frames.append((frame.index, frame.timestamp))
-            with timer("motion_filter"):
-                is_kf, _ = mfilter.check(image, fe.initialised)
             if is_kf:
                 # the features run on a worker while the frontend matches the new edges; the
                 # "features" stage is the time the BA then waits for them
@@ -170,9 +169,9 @@ class Tracker:
                     prior = grid_disparity(depth, grid)
                 thumb = cv2.resize(image, (hw[1] // s, hw[0] // s), interpolation=cv2.INTER_AREA)
                 k = fe.add_keyframe(frame.index, frame.timestamp, image, thumb, feats, prior)
+                scout.taken(fe.initialised)
                 with timer("global_ba"):
                     gba.keyframe_added(k, image)
-                mfilter.accept(image)
                 with timer("filler"):
                     filler.update()
             else:
@@ -213,7 +212,13 @@ class Tracker:
         corr = Timed(self.correspondence, timer, "flow", ("match", "match_pair", "match_all"))
         channels = self.features.channels if self.features is not None else 0
         fe = Frontend(cfg, params, backend, corr, grid, k8, channels)
-        mfilter = MotionFilter(cfg.motion_filter)
+        # the motion filter and each new keyframe's edge pair to the previous one run ahead on the
+        # prefetch thread, beside the main thread's BA (without a prefetch thread, on the main one)
+        ahead = cfg.frontend.match_ahead and cfg.io.prefetch > 0
+        scout = Scout(MotionFilter(cfg.motion_filter), timer,
+                      (lambda a, b: fe.match_adjacent(a, b, self.correspondence)) if ahead else None)
+        if ahead:
+            fe.early = scout
         filler = TrajectoryFiller(fe, cfg.filler)
         fe.on_remove = filler.keyframe_removed
         gba = GlobalBackend(fe, cfg.backend)
@@ -227,17 +232,18 @@ class Tracker:
                 source.load_depth = cfg.io.use_depth
                 lazy = getattr(source, "lazy_depth", False)
                 source.lazy_depth = True  # decode and prepare the depth of keyframes only (_first_pass)
-            items = prefetched(((f, preparer.image(f.image), f.depth if callable(f.depth) else
-                                 (None if f.depth is None else preparer.depth(f.depth))) for f in source),
+            items = prefetched(scout.frames((f, preparer.image(f.image), f.depth if callable(f.depth) else
+                                             (None if f.depth is None else preparer.depth(f.depth))) for f in source),
                                cfg.io.prefetch)
             pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="droidw-features")
             try:
-                self._first_pass(items, fe, mfilter, filler, gba, frames, bar, grid, hw, pool, preparer)
+                self._first_pass(items, fe, scout, filler, gba, frames, bar, grid, hw, pool, preparer)
             except BaseException:
                 filler.close()  # stops the filler's flow worker
                 raise
             finally:
                 pool.shutdown(wait=True, cancel_futures=True)
+                scout.close()  # the prefetch thread may wait for the tracker to take a candidate
                 items.close()  # stops the prefetch thread, also after an error
                 if restore is not None:
                     source.load_depth = restore

@@ -1,0 +1,130 @@
+"""Keyframe candidates decided ahead of the frontend, and a new keyframe's first edge matched early.
+
+Once the map is initialised, the motion filter depends on the images alone
+(the flow from the last candidate, which becomes the new reference whatever
+the frontend later does with it), so it can run on the prefetch thread,
+frames ahead of the tracker.  When it flags a candidate c there, the scout
+also matches c with the previous candidate p, both directions from one
+forward-backward DIS pair, without an initial flow.  That is exactly the
+frontend's edge pair (k, k − 1) once c becomes keyframe k: keyframe removal
+only ever drops the second-newest keyframe, so the newest is always the last
+candidate.  The pair is then computed on the second core while the main
+thread runs the previous keyframe's window BA (on one torch thread), instead
+of after it.  The result is the same as on the main thread: DIS without an
+initial flow depends on its two images only (:mod:`droidw_cli.correspondence.dis`).
+
+Before initialisation the filter's rule (median flow, lower quartile after
+``max_gap`` frames) depends on whether the frontend has initialised, which
+it may do at any candidate: the scout then waits after each candidate until
+the tracker has taken it (:meth:`Scout.taken`), so it decides every frame as
+the main thread would have.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Any
+
+import numpy as np
+
+from droidw_cli.slam.motion_filter import MotionFilter
+from droidw_cli.slam.timing import StageTimer
+
+#: what the scout hands on per frame: (frame, image, depth, is the frame a keyframe candidate)
+Scouted = tuple[Any, np.ndarray, Any, bool]
+
+
+class Scout:
+    """The motion filter, run wherever :meth:`frames` is iterated, and early matches on a worker of its own.
+
+    ``prematch(image_c, image_p)`` returns the frontend's match of the pair
+    (its :meth:`~droidw_cli.slam.frontend.Frontend.match_adjacent`); None: no early match.
+    The early matches run only between :meth:`release` and :meth:`hold`: the
+    tracker releases them while its main thread runs BA on one core, and holds
+    them while it matches on both.
+    """
+
+    def __init__(self, mfilter: MotionFilter, timer: StageTimer | None = None,
+                 prematch: Callable[[np.ndarray, np.ndarray], Any] | None = None):
+        self.mfilter = mfilter
+        self._timer = timer or StageTimer()  # "motion_filter": its time on the thread that iterates frames()
+        self._prematch = prematch
+        self._initialised = False
+        self._turn = threading.Event()  # set: the tracker has taken the last candidate
+        self._turn.set()
+        self._closed = False
+        self._lock = threading.Lock()
+        self._released = False
+        self._pending: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}  # not started yet
+        self._started: dict[tuple[int, int], Future] = {}
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="droidw-scout") if prematch is not None else None
+
+    def frames(self, items: Iterable[tuple[Any, np.ndarray, Any]]) -> Iterator[Scouted]:
+        """(frame, image, depth) items → (frame, image, depth, is_candidate), in order."""
+        previous: tuple[int, np.ndarray] | None = None
+        for frame, image, depth in items:
+            initialised = self._initialised
+            with self._timer("motion_filter"):
+                candidate, _ = self.mfilter.check(image, initialised)
+            if not candidate:
+                yield frame, image, depth, False
+                continue
+            self.mfilter.accept(image)
+            if initialised and previous is not None and self._pool is not None:
+                with self._lock:
+                    self._pending[(frame.index, previous[0])] = (image, previous[1])
+                    if self._released:
+                        self._start()
+            previous = (frame.index, image)
+            if initialised:
+                yield frame, image, depth, True
+                continue
+            self._turn.clear()
+            yield frame, image, depth, True
+            while not self._turn.wait(0.05):  # until the tracker has added it (or stopped)
+                if self._closed:
+                    return
+
+    def taken(self, initialised: bool) -> None:
+        """The tracker has added the last candidate; ``initialised``: the frontend's state after it."""
+        self._initialised = self._initialised or initialised
+        self._turn.set()
+
+    def hold(self) -> None:
+        """Start no early match until :meth:`release` (running ones go on)."""
+        with self._lock:
+            self._released = False
+
+    def release(self) -> None:
+        """Start the early matches of the candidates flagged so far, and of later ones as they come."""
+        with self._lock:
+            self._released = True
+            self._start()
+
+    def _start(self) -> None:
+        for key, (image_c, image_p) in self._pending.items():
+            self._started[key] = self._pool.submit(self._prematch, image_c, image_p)
+        self._pending.clear()
+
+    def matched(self, frame_i: int, frame_j: int) -> Any | None:
+        """The early match of candidate frame ``frame_i`` with its predecessor ``frame_j`` (waiting
+        for it when it has started), or None when it has not started.
+
+        Everything flagged for this and earlier candidates is forgotten (the
+        tracker has matched them).
+        """
+        with self._lock:
+            future = self._started.pop((frame_i, frame_j), None)
+            for table in (self._pending, self._started):
+                for key in [key for key in table if key[0] <= frame_i]:
+                    del table[key]
+        return None if future is None else future.result()
+
+    def close(self) -> None:
+        """Stop waiting for the tracker (so that the prefetch thread can end) and stop the worker."""
+        self._closed = True
+        self._turn.set()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
