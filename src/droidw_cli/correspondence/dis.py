@@ -139,8 +139,9 @@ class DISCorrespondence(CorrespondenceSource):
         ``init_flow``), then the scoring of each correspondence (:meth:`CorrespondenceSource.stages`)."""
         init = self._check(call.image_i, call.image_j, call.init_flow)
         gray_i, gray_j = to_gray(call.image_i), to_gray(call.image_j)
-        back = None if init is None else invert_flow(init)
-        jobs = [lambda: self.flow(gray_i, gray_j, init), lambda: self.flow(gray_j, gray_i, back)]
+        # the backward flow's start (the inverse of init_flow) is made in its job, off the calling thread
+        jobs = [lambda: self.flow(gray_i, gray_j, init),
+                lambda: self.flow(gray_j, gray_i, None if init is None else invert_flow(init))]
 
         def finish(outs):
             fwd, bwd = outs
