@@ -13,6 +13,7 @@ import dataclasses
 import os
 import time
 import warnings
+from collections.abc import Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -28,7 +29,7 @@ from droidw_cli.dynamics.objects import DynamicRecord, finish
 from droidw_cli.errors import InputError
 from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics, unscale_intrinsics
 from droidw_cli.io.calibration import Calibration
-from droidw_cli.io.frames import FrameSource
+from droidw_cli.io.frames import Frame, FrameSource
 from droidw_cli.io.jpeg import JpegStack
 from droidw_cli.io.prefetch import prefetched
 from droidw_cli.io.prepare import FramePreparer
@@ -110,6 +111,16 @@ def _dynamic_record(fe: Frontend, preparer: FramePreparer) -> DynamicRecord | No
         work = (table[:, col] + 0.5) * BA_SCALE - 0.5
         table[:, col] = (work + off + 0.5) / scale - 0.5
     return DynamicRecord(rec.masks, rec.ids, table, rec.masked)
+
+
+def _prepared(source: FrameSource, preparer: FramePreparer) -> Iterator[tuple[Frame, np.ndarray, object]]:
+    """(frame, working-size image, depth) per input frame.  The frame carries the working image, not the
+    decoded one: the prefetch queue holds ``io.prefetch`` items, which at 4K input would otherwise be
+    25 MB each.  The depth is a LazyDepth (decoded for keyframes only) or prepared."""
+    for f in source:
+        image = preparer.image(f.image)
+        depth = f.depth if callable(f.depth) else (None if f.depth is None else preparer.depth(f.depth))
+        yield Frame(f.index, f.timestamp, image), image, depth
 
 
 def _confidence_half(fe: Frontend, chunk: int = 256) -> np.ndarray:
@@ -232,9 +243,7 @@ class Tracker:
                 source.load_depth = cfg.io.use_depth
                 lazy = getattr(source, "lazy_depth", False)
                 source.lazy_depth = True  # decode and prepare the depth of keyframes only (_first_pass)
-            items = prefetched(scout.frames((f, preparer.image(f.image), f.depth if callable(f.depth) else
-                                             (None if f.depth is None else preparer.depth(f.depth))) for f in source),
-                               cfg.io.prefetch)
+            items = prefetched(scout.frames(_prepared(source, preparer)), cfg.io.prefetch)
             pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="droidw-features")
             try:
                 self._first_pass(items, fe, scout, filler, gba, frames, bar, grid, hw, pool, preparer)
