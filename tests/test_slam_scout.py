@@ -103,3 +103,23 @@ def test_close_ends_a_scout_that_waits_for_the_tracker():
     t = time.perf_counter()
     items.close()
     assert time.perf_counter() - t < 2.0
+
+
+def test_early_features_come_before_the_match_and_only_after_release():
+    frames = _walk(30)
+    order = []
+    scout = Scout(MotionFilter(MotionFilterConfig(max_gap=2)),
+                  prematch=lambda c, p: order.append("match") or "m",
+                  prefeatures=lambda c: order.append("features") or c.mean())
+    scout.taken(initialised=True)
+    flagged = [f.index for f, _, _, kf in scout.frames((_Frame(i), im, None) for i, im in enumerate(frames)) if kf]
+    assert not order
+    scout.release()
+    future = scout.features(flagged[2])
+    assert future is not None and future.result() == frames[flagged[2]].mean()
+    assert scout.matched(flagged[2], flagged[1]) == "m"
+    assert scout.features(flagged[1]) is None  # an earlier candidate's: forgotten
+    assert scout.matched(flagged[-1], flagged[-2]) == "m"  # the last job: every one before it has run
+    scout.close()
+    assert order[:3] == ["features", "features", "match"]  # the first candidate has no predecessor to match
+    assert order.count("features") == len(flagged) and order.count("match") == len(flagged) - 1

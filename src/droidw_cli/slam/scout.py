@@ -1,4 +1,4 @@
-"""Keyframe candidates decided ahead of the frontend, and a new keyframe's first edge matched early.
+"""Keyframe candidates decided ahead of the frontend; a new keyframe's first edge and features made early.
 
 Once the map is initialised, the motion filter depends on the images alone
 (the flow from the last candidate, which becomes the new reference whatever
@@ -12,6 +12,8 @@ candidate.  The pair is then computed on the second core while the main
 thread runs the previous keyframe's window BA (on one torch thread), instead
 of after it.  The result is the same as on the main thread: DIS without an
 initial flow depends on its two images only (:mod:`droidw_cli.correspondence.dis`).
+The candidate's features (the uncertainty's input) are extracted there too,
+before the match.
 
 Before initialisation the filter's rule (median flow, lower quartile after
 ``max_gap`` frames) depends on whether the frontend has initialised, which
@@ -25,6 +27,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -37,29 +40,35 @@ Scouted = tuple[Any, np.ndarray, Any, bool]
 
 
 class Scout:
-    """The motion filter, run wherever :meth:`frames` is iterated, and early matches on a worker of its own.
+    """The motion filter, run wherever :meth:`frames` is iterated, and early work on a worker of its own.
 
     ``prematch(image_c, image_p)`` returns the frontend's match of the pair
-    (its :meth:`~droidw_cli.slam.frontend.Frontend.match_adjacent`); None: no early match.
-    The early matches run only between :meth:`release` and :meth:`hold`: the
-    tracker releases them while its main thread runs BA on one core, and holds
-    them while it matches on both.
+    (its :meth:`~droidw_cli.slam.frontend.Frontend.match_adjacent`), and
+    ``prefeatures(image_c)`` the candidate's features; None: not done early.
+    The early work runs only between :meth:`release` and :meth:`hold`: the
+    tracker releases it while its main thread runs BA on one core, and holds
+    it while it matches on both.
     """
 
     def __init__(self, mfilter: MotionFilter, timer: StageTimer | None = None,
-                 prematch: Callable[[np.ndarray, np.ndarray], Any] | None = None):
+                 prematch: Callable[[np.ndarray, np.ndarray], Any] | None = None,
+                 prefeatures: Callable[[np.ndarray], Any] | None = None):
         self.mfilter = mfilter
         self._timer = timer or StageTimer()  # "motion_filter": its time on the thread that iterates frames()
         self._prematch = prematch
+        self._prefeatures = prefeatures
         self._initialised = False
         self._turn = threading.Event()  # set: the tracker has taken the last candidate
         self._turn.set()
         self._closed = False
         self._lock = threading.Lock()
         self._released = False
-        self._pending: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}  # not started yet
-        self._started: dict[tuple[int, int], Future] = {}
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="droidw-scout") if prematch is not None else None
+        # ("features", candidate frame) or ("match", candidate frame, previous candidate frame) →
+        # the job not started yet, or its future once started
+        self._pending: dict[tuple, Callable[[], Any]] = {}
+        self._started: dict[tuple, Future] = {}
+        early = prematch is not None or prefeatures is not None
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="droidw-scout") if early else None
 
     def frames(self, items: Iterable[tuple[Any, np.ndarray, Any]]) -> Iterator[Scouted]:
         """(frame, image, depth) items → (frame, image, depth, is_candidate), in order."""
@@ -72,9 +81,14 @@ class Scout:
                 yield frame, image, depth, False
                 continue
             self.mfilter.accept(image)
-            if initialised and previous is not None and self._pool is not None:
+            if initialised:
+                jobs = {}
+                if self._prefeatures is not None:  # first: the BA needs them as soon as the match
+                    jobs[("features", frame.index)] = partial(self._prefeatures, image)
+                if self._prematch is not None and previous is not None:
+                    jobs[("match", frame.index, previous[0])] = partial(self._prematch, image, previous[1])
                 with self._lock:
-                    self._pending[(frame.index, previous[0])] = (image, previous[1])
+                    self._pending.update(jobs)
                     if self._released:
                         self._start()
             previous = (frame.index, image)
@@ -93,34 +107,40 @@ class Scout:
         self._turn.set()
 
     def hold(self) -> None:
-        """Start no early match until :meth:`release` (running ones go on)."""
+        """Start no early work until :meth:`release` (running jobs go on)."""
         with self._lock:
             self._released = False
 
     def release(self) -> None:
-        """Start the early matches of the candidates flagged so far, and of later ones as they come."""
+        """Start the early work of the candidates flagged so far, and of later ones as they come."""
         with self._lock:
             self._released = True
             self._start()
 
     def _start(self) -> None:
-        for key, (image_c, image_p) in self._pending.items():
-            self._started[key] = self._pool.submit(self._prematch, image_c, image_p)
+        for key, job in self._pending.items():
+            self._started[key] = self._pool.submit(job)
         self._pending.clear()
+
+    def _take(self, key: tuple) -> Future | None:
+        """The started job ``key`` (once); jobs of its kind for this or earlier candidates are forgotten
+        (the tracker has done them itself)."""
+        with self._lock:
+            future = self._started.pop(key, None)
+            for table in (self._pending, self._started):
+                for old in [old for old in table if old[0] == key[0] and old[1] <= key[1]]:
+                    del table[old]
+        return future
 
     def matched(self, frame_i: int, frame_j: int) -> Any | None:
         """The early match of candidate frame ``frame_i`` with its predecessor ``frame_j`` (waiting
-        for it when it has started), or None when it has not started.
-
-        Everything flagged for this and earlier candidates is forgotten (the
-        tracker has matched them).
-        """
-        with self._lock:
-            future = self._started.pop((frame_i, frame_j), None)
-            for table in (self._pending, self._started):
-                for key in [key for key in table if key[0] <= frame_i]:
-                    del table[key]
+        for it when it has started), or None when it has not started."""
+        future = self._take(("match", frame_i, frame_j))
         return None if future is None else future.result()
+
+    def features(self, frame: int) -> Future | None:
+        """The future of candidate ``frame``'s early features, or None when they have not started."""
+        return self._take(("features", frame))
 
     def close(self) -> None:
         """Stop waiting for the tracker (so that the prefetch thread can end) and stop the worker."""

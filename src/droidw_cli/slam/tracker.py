@@ -170,7 +170,9 @@ class Tracker:
             if is_kf:
                 # the features run on a worker while the frontend matches the new edges; the
                 # "features" stage is the time the BA then waits for them
-                feats = None if self.features is None else _Pending(pool.submit(self._extract, image), timer)
+                feats = None
+                if self.features is not None:  # started by the scout during the last BA, or now
+                    feats = _Pending(scout.features(frame.index) or pool.submit(self._extract, image), timer)
                 prior = None
                 if cfg.io.use_depth and callable(depth):  # a LazyDepth: decoded for keyframes only
                     with timer("decode"):
@@ -227,7 +229,8 @@ class Tracker:
         # prefetch thread, beside the main thread's BA (without a prefetch thread, on the main one)
         ahead = cfg.frontend.match_ahead and cfg.io.prefetch > 0
         scout = Scout(MotionFilter(cfg.motion_filter), timer,
-                      (lambda a, b: fe.match_adjacent(a, b, self.correspondence)) if ahead else None)
+                      (lambda a, b: fe.match_adjacent(a, b, self.correspondence)) if ahead else None,
+                      self._extract if ahead and self.features is not None else None)
         if ahead:
             fe.early = scout
         filler = TrajectoryFiller(fe, cfg.filler)
