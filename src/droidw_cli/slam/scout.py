@@ -82,24 +82,28 @@ class Scout:
                 continue
             self.mfilter.accept(image)
             if initialised:
-                jobs = {}
-                if self._prefeatures is not None:  # first: the BA needs them as soon as the match
-                    jobs[("features", frame.index)] = partial(self._prefeatures, image)
-                if self._prematch is not None and previous is not None:
-                    jobs[("match", frame.index, previous[0])] = partial(self._prematch, image, previous[1])
-                with self._lock:
-                    self._pending.update(jobs)
-                    if self._released:
-                        self._start()
-            previous = (frame.index, image)
-            if initialised:
+                self._queue(frame.index, image, previous)
+                previous = (frame.index, image)
                 yield frame, image, depth, True
                 continue
+            previous = (frame.index, image)
             self._turn.clear()
             yield frame, image, depth, True
             while not self._turn.wait(0.05):  # until the tracker has added it (or stopped)
                 if self._closed:
                     return
+
+    def _queue(self, frame: int, image: np.ndarray, previous: tuple[int, np.ndarray] | None) -> None:
+        """The early work of candidate ``frame``, started now if released."""
+        jobs = {}
+        if self._prefeatures is not None:  # first: the BA needs them as soon as the match
+            jobs[("features", frame)] = partial(self._prefeatures, image)
+        if self._prematch is not None and previous is not None:
+            jobs[("match", frame, previous[0])] = partial(self._prematch, image, previous[1])
+        with self._lock:
+            self._pending.update(jobs)
+            if self._released:
+                self._start()
 
     def taken(self, initialised: bool) -> None:
         """The tracker has added the last candidate; ``initialised``: the frontend's state after it."""
