@@ -53,6 +53,7 @@ def test_unknown_key_names_key_and_file(tmp_path):
     ("uncertainty.enable=3", "true or false"),
     ("uncertainty.mode=bogus", "uncertainty.mode"),
     ("frontend", "expected key.sub=value"),
+    ("dynamics.track_min_new=1.5", "track_min_new"),
 ])
 def test_bad_values(override, message):
     with pytest.raises(ConfigError, match=message):

@@ -237,3 +237,10 @@ def test_a_carried_mask_replaces_the_centre_hypotheses():
         got = tr.update(b1, predicted={obj.id: (66.0, 28.0)},
                         predicted_masks={obj.id: _box(24, 20, 12, 16)} if carried else None)
         assert (got[0].id == obj.id) == same
+
+
+def test_a_new_object_needs_min_new_of_the_view():
+    """A 90-pixel blob (1.5 % of 60 × 100) starts a track at min_new 0.01, not at 0.02 (dynamics.track_min_new)."""
+    blob = _box(40, 20, 9, 10)
+    assert [o.area for o in DynamicObjectTracker(min_new=0.01).update(blob)] == [90]
+    assert DynamicObjectTracker(min_new=0.02).update(blob) == []

@@ -236,7 +236,7 @@ def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, in
     d = disps_obs[:n].detach().float().cpu()
     kk = intrinsics.detach().double().cpu()
     tracker = DynamicObjectTracker(border=cfg.track_border, max_growth=cfg.track_growth, max_jump=cfg.track_jump,
-                                   min_area=masks.params.min_object_area)
+                                   min_area=masks.params.min_object_area, min_new=cfg.track_min_new)
     ids = np.full((n, h, w), -1, dtype=np.int16)  # int32 only once an id needs it (see DynamicRecord)
     rows: list[list[float]] = []
     stats: dict[int, tuple[Tensor, float, float]] = {}
