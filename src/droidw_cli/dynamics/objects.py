@@ -46,7 +46,12 @@ After the global BA (:func:`finish`):
    within max(``color_tol``, ``color_spread`` σ) of its mean colour μ), and
    the grown region is kept when its area is within ``track_growth``× of the
    object's last area either way.
-3. Per object and keyframe: the image centre (inscribed circle, mapped to the
+   With ``track_backtrack``, each new track then labels the keyframes before
+   its birth (:mod:`~droidw_cli.dynamics.backtrack`: moved back at its image
+   velocity; the recorded flow on a mover follows the background, 3 grid px
+   the wrong way on the walk, so it carries the camera's motion, not the
+   walker's).
+3. Per object and keyframe of the final id maps: the image centre (inscribed circle, mapped to the
    input image's pixels by the caller) and the world centroid
 
        X̄ = (1/|O|) Σ_{p∈O} G_k⁻¹ · (D_p K⁻¹ p̃),
@@ -64,7 +69,9 @@ import torch
 from torch import Tensor
 
 from droidw_cli.config import DynamicsConfig
+from droidw_cli.dynamics.backtrack import backtrack
 from droidw_cli.dynamics.inloop import KeyframeMasks
+from droidw_cli.dynamics.refine import inscribed_centres, label_components
 from droidw_cli.dynamics.tracker import DynamicObjectTracker
 from droidw_cli.slam.poses import invert, to_matrix
 
@@ -222,6 +229,27 @@ def final_pass(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intri
     return out
 
 
+def _centroid(mask: np.ndarray, depth: np.ndarray, rays: np.ndarray, c2w: np.ndarray) -> np.ndarray:
+    """World centroid X̄ of an object's pixels with known depth (NaN without any), step 3."""
+    ok = mask & (depth > 0)
+    if not ok.any():
+        return np.full(3, np.nan)
+    return ((rays[ok] * depth[ok][:, None]) @ c2w[:3, :3].T + c2w[:3, 3]).mean(0)
+
+
+def _table(ids: np.ndarray, disps: Tensor, rays: np.ndarray, c2w: np.ndarray) -> np.ndarray:
+    """Step 3: the rows of :data:`TABLE_COLUMNS` of every object in every keyframe of the id maps."""
+    rows = []
+    for k, lab in enumerate(ids):
+        depth = _depth(disps[k]).numpy().astype(np.float64)
+        for tid in np.unique(lab[lab >= 0]):
+            mask = lab == tid
+            centres, radii = inscribed_centres(label_components(mask))
+            cx, cy = centres[int(torch.argmax(radii))].tolist()
+            rows.append([k, int(tid), cx, cy, *_centroid(mask, depth, rays, c2w[k]), int(mask.sum())])
+    return np.array(rows, dtype=np.float64).reshape(-1, len(TABLE_COLUMNS))
+
+
 def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intrinsics: Tensor,
                   cfg: DynamicsConfig, dynamic: list[Tensor] | None = None, sensor_depth: bool = False) -> DynamicRecord:
     """Steps 2-3: propagation, ids, and per object and keyframe its centre and world centroid.
@@ -238,7 +266,6 @@ def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, in
     tracker = DynamicObjectTracker(border=cfg.track_border, max_growth=cfg.track_growth, max_jump=cfg.track_jump,
                                    min_area=masks.params.min_object_area, min_new=cfg.track_min_new)
     ids = np.full((n, h, w), -1, dtype=np.int16)  # int32 only once an id needs it (see DynamicRecord)
-    rows: list[list[float]] = []
     stats: dict[int, tuple[Tensor, float, float]] = {}
     gx, gy = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     rays = np.stack([(gx - float(kk[2])) / float(kk[0]), (gy - float(kk[3])) / float(kk[1]), np.ones_like(gx)], -1)
@@ -262,16 +289,14 @@ def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, in
             s = _stats(masks.image(k), depth, torch.from_numpy(obj.mask))
             if s is not None:
                 stats[obj.id] = s
-            ok = obj.mask & (depth_np > 0)
-            centroid = np.full(3, np.nan)
-            if ok.any():
-                world = (rays[ok] * depth_np[ok][:, None]) @ c2w[k, :3, :3].T + c2w[k, :3, 3]
-                centroid = world.mean(0)
-                if not obj.occluded:  # a partly hidden object's centroid is biased: not used for its motion
+            if not obj.occluded:  # a partly hidden object's centroid is biased: not used for its motion
+                centroid = _centroid(obj.mask, depth_np, rays, c2w[k])
+                if np.isfinite(centroid).all():
                     history.setdefault(obj.id, []).append((k, centroid))
-            rows.append([k, obj.id, obj.centre[0], obj.centre[1], *centroid, obj.area])
-    table = np.array(rows, dtype=np.float64).reshape(-1, len(TABLE_COLUMNS))
     stacked = torch.stack(dynamic).numpy() if n else np.zeros((0, h, w), dtype=bool)
+    if cfg.track_backtrack:
+        ids = backtrack(ids, stacked, times, masks.params.min_object_area)
+    table = _table(ids, d, rays, c2w)
     return DynamicRecord(stacked, ids, table)
 
 
