@@ -71,7 +71,7 @@ from torch import Tensor
 from droidw_cli.config import DynamicsConfig
 from droidw_cli.dynamics.backtrack import backtrack
 from droidw_cli.dynamics.inloop import KeyframeMasks
-from droidw_cli.dynamics.refine import inscribed_centres, label_components
+from droidw_cli.dynamics.refine import object_centre
 from droidw_cli.dynamics.tracker import DynamicObjectTracker
 from droidw_cli.slam.poses import invert, to_matrix
 
@@ -244,8 +244,7 @@ def _table(ids: np.ndarray, disps: Tensor, rays: np.ndarray, c2w: np.ndarray) ->
         depth = _depth(disps[k]).numpy().astype(np.float64)
         for tid in np.unique(lab[lab >= 0]):
             mask = lab == tid
-            centres, radii = inscribed_centres(label_components(mask))
-            cx, cy = centres[int(torch.argmax(radii))].tolist()
+            cx, cy = object_centre(mask)
             rows.append([k, int(tid), cx, cy, *_centroid(mask, depth, rays, c2w[k]), int(mask.sum())])
     return np.array(rows, dtype=np.float64).reshape(-1, len(TABLE_COLUMNS))
 

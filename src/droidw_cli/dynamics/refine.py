@@ -162,6 +162,13 @@ def inscribed_centres(labels: Tensor) -> tuple[Tensor, Tensor]:
     return (torch.from_numpy(centres).to(labels.device), torch.from_numpy(radii).to(labels.device))
 
 
+def object_centre(mask) -> tuple[float, float]:
+    """ADD-SLAM's object centre: the inscribed-circle centre (x, y) of the mask's largest part (by radius)."""
+    centres, radii = inscribed_centres(label_components(mask))
+    x, y = centres[int(torch.argmax(radii))].tolist()
+    return float(x), float(y)
+
+
 def make_objects(labels: Tensor, min_area: int = 1) -> Objects:
     """Objects (labels, centres, radii, areas) of a label map, dropping labels under ``min_area``."""
     labels = _relabel(labels.long(), min_area)

@@ -75,7 +75,7 @@ from torch import Tensor
 
 from droidw_cli.dynamics.association import (bhattacharyya, colour_bins, colour_histogram, depth_components,
                                              distance_to, median_depth, shift_mask)
-from droidw_cli.dynamics.refine import inscribed_centres, label_components, make_objects
+from droidw_cli.dynamics.refine import make_objects, object_centre
 
 Hypotheses = tuple[float, float] | list[tuple[float, float]]
 
@@ -194,9 +194,7 @@ class DynamicObjectTracker:
 
     def _object(self, tid: int, mask: np.ndarray, depth: np.ndarray | None, occluded: bool) -> TrackedObject:
         """The object of a track from its pixels: area, the inscribed-circle centre of its largest part, depth."""
-        centres, radii = inscribed_centres(label_components(mask))
-        c = centres[int(torch.argmax(radii))].tolist()
-        return TrackedObject(tid, mask, (float(c[0]), float(c[1])), int(mask.sum()), median_depth(mask, depth),
+        return TrackedObject(tid, mask, object_centre(mask), int(mask.sum()), median_depth(mask, depth),
                              bool(occluded))
 
     def _learn_colour(self, tid: int, mask: np.ndarray, bins: np.ndarray | None) -> None:
