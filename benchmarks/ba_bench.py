@@ -67,6 +67,7 @@ def measure_window(backend, prob, reps: int, iters: int = 5) -> float | None:
     a fresh window of ``iters`` iterations (so it includes the per-window set-up).
     None when the SLAM modules cannot be used this way.
     """
+    import numpy as np
     import torch
 
     from droidw_cli.ba.params import BAParams, UncertaintyParams
@@ -84,11 +85,12 @@ def measure_window(backend, prob, reps: int, iters: int = 5) -> float | None:
     dev = backend.device
     on_device = {"device": dev} if dev.type != "cpu" else {}  # (a baseline checkout may predate the argument)
     edges = prob.edges.to(dev)
+    thumbnail = np.zeros((h, w, 3), np.uint8)  # the buffer keeps a JPEG thumbnail of every keyframe
     times = []
     for _ in range(reps + 1):
         buf = KeyframeBuffer((h, w), feature_channels=c, **on_device)
         for t in range(n):
-            buf.append(t, float(t), start.poses[t], start.disps[t], None, start.features[t])
+            buf.append(t, float(t), start.poses[t], start.disps[t], thumbnail, start.features[t])
         theta = 0.01 * torch.randn(c + 3, generator=torch.Generator().manual_seed(0))
         shared = SharedState(intrinsics=start.intrinsics.to(dev), theta=theta.to(dev), iterations=100)
         if dev.type == "cuda":
