@@ -54,6 +54,13 @@ def test_unknown_key_names_key_and_file(tmp_path):
     ("uncertainty.mode=bogus", "uncertainty.mode"),
     ("frontend", "expected key.sub=value"),
     ("dynamics.track_min_new=1.5", "track_min_new"),
+    ("frontend.window=2", "window > radius"),  # crashed in initialisation (its 2nd predecessor's image was gone)
+    ("frontend.window=-5", "window > radius"),
+    ("frontend.warmup_min=1", "warmup_min"),
+    ("frontend.iters1=0", "iters1"),
+    ("frontend.beta=1.5", "beta"),
+    ("frontend.flow_thresh=0", "flow_thresh"),
+    ("threads=-1", "threads"),
 ])
 def test_bad_values(override, message):
     with pytest.raises(ConfigError, match=message):

@@ -170,6 +170,26 @@ class FrontendConfig:
     def __post_init__(self) -> None:
         if self.robust_sigma < 0:
             raise ValueError(f"frontend.robust_sigma must be >= 0, got {self.robust_sigma}")
+        if self.radius < 1 or self.window < self.radius + 1:
+            raise ValueError(f"frontend.radius must be >= 1 and frontend.window > radius (a new keyframe's edges "
+                             f"reach its {self.radius} predecessors inside the window), got window {self.window}, "
+                             f"radius {self.radius}")
+        if not 2 <= self.warmup_min <= self.warmup:
+            raise ValueError(f"frontend.warmup_min must be >= 2 and <= warmup, got {self.warmup_min} and {self.warmup}")
+        counts = {"iters1": self.iters1, "init_iters": self.init_iters, "max_edges": self.max_edges,
+                  "max_age": self.max_age, "removal_max_span": self.removal_max_span,
+                  "proximity_stride": self.proximity_stride}
+        for name, value in counts.items():
+            if value < 1:
+                raise ValueError(f"frontend.{name} must be >= 1, got {value}")
+        for name in ("iters2", "nms", "proximity_max", "keyframe_thresh", "init_parallax"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"frontend.{name} must be >= 0, got {getattr(self, name)}")
+        if not self.flow_thresh > 0:
+            raise ValueError(f"frontend.flow_thresh must be > 0, got {self.flow_thresh}")
+        for name in ("beta", "velocity_damping"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"frontend.{name} must be in [0, 1], got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)
@@ -323,6 +343,8 @@ class TrackConfig:
     threads: int = 0
 
     def __post_init__(self) -> None:
+        if self.threads < 0:
+            raise ValueError(f"threads must be >= 0 (0: one less than the usable cores), got {self.threads}")
         # The uncertainty section is the single source of truth for the BA's copy.
         object.__setattr__(self, "ba", dataclasses.replace(self.ba, uncertainty=self.uncertainty))
         if self.backend.horizon < self.frontend.window:
