@@ -70,6 +70,11 @@ def main(argv: list[str] | None = None) -> None:
     except UserError as exc:
         click.echo(f"droidw: error: {exc}", err=True)
         sys.exit(2)
+    except OSError as exc:  # a path the system refused: no such folder, no permission, a full disk
+        from droidw_cli.io.outputs import describe_os_error
+
+        click.echo(f"droidw: error: {describe_os_error(exc)}", err=True)
+        sys.exit(2)
     except click.exceptions.Abort:
         click.echo("droidw: aborted", err=True)
         sys.exit(130)

@@ -51,7 +51,11 @@ def evaluate(gt_path: str, est_path: str, align: str, max_diff: float, t_offset:
     from droidw_cli.eval import inputs
     from droidw_cli.eval.metrics import evaluate_ate, evaluate_rpe
     from droidw_cli.eval.report import EvalInfo, format_text, plot_top_view, save_results, to_json_dict
+    from droidw_cli.io.outputs import check_output_file
 
+    for path in (plot_path, results_path):
+        if path is not None:
+            check_output_file(path)
     fmt = fmt.lower()
     gt = inputs.load(gt_path, (gt_format or fmt).lower(), gt_times, role="gt")
     est = inputs.load(inputs.resolve_estimate_path(est_path), fmt, est_times, role="est")

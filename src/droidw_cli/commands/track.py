@@ -58,6 +58,7 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
     from droidw_cli.features import get_feature_extractor
     from droidw_cli.io.calibration import load_calibration
     from droidw_cli.io.frames import open_source
+    from droidw_cli.io.outputs import check_output_folder
     from droidw_cli.slam.tracker import Tracker
 
     config_name, overrides = depth_config(config_name, overrides, depth)
@@ -67,6 +68,7 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
                                     if v is not None})
     cfg = dataclasses.replace(cfg, io=io)
     torch.manual_seed(cfg.seed)
+    check_output_folder(out_dir)  # before the run, not after it
     source = open_source(input_path, stride=io.stride, start=io.start, max_frames=io.max_frames, fps=io.fps)
     if io.use_depth:
         open_depth(source, depth_scale)

@@ -28,7 +28,11 @@ def view(run_dir, save_path, stride, quiet):
     """
     from droidw_cli.export.rrd import load_run_folder, require_rerun, save_rrd, show
 
+    from droidw_cli.io.outputs import check_output_file
+
     require_rerun()
+    if save_path is not None:
+        check_output_file(save_path)
     run = load_run_folder(run_dir)
     progress = not quiet and sys.stderr.isatty()
     counts = save_rrd(run, save_path, progress, stride) if save_path is not None else show(run, progress, stride)
