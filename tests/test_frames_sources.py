@@ -233,6 +233,9 @@ def test_tum_rgbd_association(tmp_path):
     via_txt = open_source(tmp_path / "rgbd_dataset" / "rgb.txt", start=1, max_frames=2)
     assert via_txt.intrinsics_hint.distortion == (0.1, -0.01, 0.0, 0.0)
     assert [f.timestamp for f in via_txt] == pytest.approx([1.033, 1.066])
+    # a selection past the end says so, not that the folder's calibration misfits a 0-pixel image
+    with pytest.raises(InputError, match="no frames left after start=10"):
+        open_source(tmp_path / "rgbd_dataset", start=10)
 
 
 def test_tum_bad_listing(tmp_path):

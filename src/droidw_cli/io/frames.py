@@ -203,10 +203,14 @@ class FrameSource(ABC):
         return f"{type(self).__name__}({str(self.path)!r}, frames={len(self)}, size={self.size})"
 
 
+def empty_selection(path: Path, sel: Selection) -> InputError:
+    """The error for a selection that leaves no frames."""
+    return InputError(f"{path}: no frames left after start={sel.start}, stride={sel.stride}, max_frames={sel.max_frames}")
+
+
 def _check_nonempty(source: FrameSource) -> FrameSource:
     if len(source) == 0:
-        sel = source.selection
-        raise InputError(f"{source.path}: no frames left after start={sel.start}, stride={sel.stride}, max_frames={sel.max_frames}")
+        raise empty_selection(source.path, source.selection)
     return source
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from droidw_cli.errors import InputError
 from droidw_cli.io.frames import (IMAGE_SUFFIXES, Frame, FrameSource, LazyDepth, Selection, decode_depth, decode_rgb,
-                                  png_size, warn_corrupt)
+                                  empty_selection, png_size, warn_corrupt)
 
 _NUMERIC_STEM = re.compile(r"^\d+(\.\d*)?$")
 _MAX_CONSECUTIVE_READ_FAILURES = 16
@@ -95,8 +95,8 @@ class ListSource(FrameSource):
             img = decode_rgb(entry.rgb)
             if img is not None:
                 return int(img.shape[0]), int(img.shape[1])
-        if not self._entries:
-            return (0, 0)
+        if not self._entries:  # before anything reads the size (a calibration file is checked against it)
+            raise empty_selection(self.path, self.selection)
         raise InputError(f"{self.path}: none of the {len(self._entries)} selected images can be decoded")
 
     @property
