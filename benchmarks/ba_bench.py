@@ -111,8 +111,9 @@ def measure(backend_name: str, keyframes: int, edges: int | None, grid: tuple[in
     from droidw_cli.ba.registry import get_backend
     from droidw_cli.ba.synthetic import make_problem, perturb
 
-    if threads:
-        torch.set_num_threads(threads)
+    from droidw_cli.slam.tracker import torch_threads
+
+    torch.set_num_threads(threads or torch_threads(0))  # default: the tracker's count (cores − 1 on a small machine)
     backend = get_backend(backend_name)
     h, w = grid
     prob = make_problem(keyframes, h=h, w=w, radius=RADIUS, max_edges=edges, channels=CHANNELS, seed=0)
@@ -219,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--edges", type=int, help="cap on the number of edges (default: all pairs up to 2 apart)")
     ap.add_argument("--grid", default="48x64", help="BA grid HxW (default 48x64)")
     ap.add_argument("--reps", type=int, default=5, help="measured repetitions (median reported)")
-    ap.add_argument("--threads", type=int, help="torch intra-op threads (default: torch's)")
+    ap.add_argument("--threads", type=int, help="torch intra-op threads (default: the tracker's, see `threads`)")
     ap.add_argument("--against", metavar="DIR", help="compare with the droidw checkout in DIR (interleaved runs)")
     ap.add_argument("--rounds", type=int, default=3, help="with --against: alternating runs per side (default 3)")
     ap.add_argument("--window", action="store_true",
