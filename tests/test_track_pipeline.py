@@ -123,3 +123,16 @@ def test_matching_ahead_changes_nothing_but_the_timing(static_seq, static_run, t
     off = _run(static_seq, tmp_path / "off", "--set", "uncertainty.enable=false", "--set", "frontend.match_ahead=false")
     assert not used
     assert (off / "traj.txt").read_bytes() == (static_run / "traj.txt").read_bytes()
+
+
+def test_auto_calibration_on_a_fixed_camera_says_it_guessed(tmp_path, capsys):
+    """No rotation, nothing to estimate f from: run.json and the output say the focal length is a guess."""
+    cfg = SynthConfig.preset("fixed", width=160, height=120, frames=20, seed=1)
+    seq = write_sequence(cfg, tmp_path / "fixed", progress=False)
+    (seq / "calib.txt").unlink()
+    out = _run(seq, tmp_path / "auto", "--calib", "auto", "--set", "uncertainty.enable=false")
+    captured = capsys.readouterr()
+    info = json.loads((out / "run.json").read_text())
+    assert info["calibration"]["source"] == "guessed"
+    assert "focal length was not estimated" in " ".join(info["warnings"])
+    assert "guessed (not estimated) calibration" in captured.out

@@ -27,7 +27,9 @@ def test_fixed_camera_gives_identity_and_warns(shared_data, tmp_path, capsys):
     deviation = np.abs(traj.poses - np.eye(4)).max()
     assert deviation < 1e-3, f"invented motion: {deviation}"
     assert "parallax" in capsys.readouterr().err
-    assert "parallax" in " ".join(json.loads((out / "run.json").read_text())["warnings"])
+    info = json.loads((out / "run.json").read_text())
+    assert "parallax" in " ".join(info["warnings"])
+    assert info["calibration"]["source"] == "guessed"  # nothing to estimate the focal length from
 
 
 @pytest.mark.parametrize("clip, frames, extra", [

@@ -88,7 +88,8 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
     features = get_feature_extractor(cfg.features.name) if cfg.uncertainty.enable else None
     result = Tracker(cfg, ba_backend, corr, features, progress=progress).run(source, calibration)
     info = run_info(result, cfg.to_dict(), ba_backend.name, str(input_path), peak_memory_mb())
-    info["calibration"]["source"] = "estimated" if result.calibration_estimated else (str(calib) if calib else "input")
+    info["calibration"]["source"] = (("estimated" if result.focal_estimated else "guessed")
+                                     if result.calibration_estimated else (str(calib) if calib else "input"))
     info["backend_choice"] = {"requested": choice.requested, "passed_over": list(choice.passed_over)}
     paths = write_run(out_dir, result, info)
     return result, paths
@@ -138,6 +139,7 @@ def track(input_path, out_dir, calib, backend, config_name, overrides, depth, de
                f"{result.fps:.1f} frames/s end to end")
     if result.calibration_estimated:
         c = result.calibration
-        click.echo(f"estimated calibration: fx={c.fx:.2f} fy={c.fy:.2f} cx={c.cx:.2f} cy={c.cy:.2f}")
+        how = "estimated" if result.focal_estimated else "guessed (not estimated)"
+        click.echo(f"{how} calibration: fx={c.fx:.2f} fy={c.fy:.2f} cx={c.cx:.2f} cy={c.cy:.2f}")
     for p in paths:
         click.echo(f"wrote {p}")

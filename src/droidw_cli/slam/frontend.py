@@ -149,6 +149,7 @@ class Frontend:
         # --calib auto: the focal guess, and the BA settings for windows that cannot constrain f
         self._focal0 = float(intrinsics8[0])
         self._fixed_focal = dataclasses.replace(params, optimize_focal="none")
+        self.focal_estimated = False  # some window BA had the focal length free (it saw enough rotation)
         self.images: dict[int, np.ndarray] = {}
         self.initialised = False
         self.on_remove = None  # called with a keyframe's index just before keyframe removal drops it
@@ -308,6 +309,8 @@ class Frontend:
         if params.optimize_focal != "none":
             if not (focal and focal_observable(self.buffer.poses[lo:hi], self.cfg.calib)):
                 params = self._fixed_focal
+            else:
+                self.focal_estimated = True
         cost = run_window(self.backend, self.buffer, lo, hi, edges, params, self.shared, iters, fixed,
                           robust_sigma=self.fcfg.robust_sigma)
         if params.optimize_focal != "none":

@@ -64,7 +64,8 @@ class TrackResult:
     objects: np.ndarray | None  # (M, 8) keyframe, id, centre x, y (input px), world centroid x, y, z, area
     theta: np.ndarray | None
     initialised: bool
-    calibration_estimated: bool = False
+    calibration_estimated: bool = False  # --calib auto
+    focal_estimated: bool = False  # … and the camera rotated enough to estimate f (else f is the initial guess)
     metric: bool = False  # the scale comes from sensor depth (RGB-D)
     timings: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
@@ -270,6 +271,11 @@ class Tracker:
                     f"{cfg.frontend.warmup_min} with {cfg.frontend.init_parallax:g} grid px of parallax, or "
                     f"{cfg.frontend.warmup}): the camera barely moved, so the trajectory stays at the identity"
                 )
+            if auto and not fe.focal_estimated:
+                collected.append(
+                    f"--calib auto: the camera never rotated {cfg.calib.min_rotation:g}° within a window, so the "
+                    f"focal length was not estimated; it stays at the initial guess of {cfg.calib.focal_init:g} × "
+                    f"the image's larger side (pass a calibration file for accurate results)")
             with timer("global_ba"):
                 gba.finish()
             self.backend.release()  # the last BA has run: its cached window features are dead weight
@@ -313,6 +319,7 @@ class Tracker:
             theta=theta,
             initialised=fe.initialised,
             calibration_estimated=auto,
+            focal_estimated=fe.focal_estimated,
             metric=bool(buf.has_prior),
             timings=timer.as_dict(),
             warnings=list(dict.fromkeys(collected)),
