@@ -81,3 +81,12 @@ def test_builtin_configs_all_load():
     for name in ("default", "tum", "rgbd", "video", "fast"):
         load_config(name)
     assert load_config("rgbd").io.use_depth is True
+
+
+def test_invalid_yaml_is_one_line_with_its_place(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("frontend:\n  window: [3\n")
+    with pytest.raises(ConfigError) as exc:
+        load_config(bad)
+    message = str(exc.value)
+    assert "\n" not in message and "invalid YAML" in message and "line 3" in message, message

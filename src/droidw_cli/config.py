@@ -21,7 +21,7 @@ from typing import Any
 import yaml
 
 from droidw_cli.ba.params import BAParams, UncertaintyParams
-from droidw_cli.errors import ConfigError
+from droidw_cli.errors import ConfigError, yaml_problem
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
 
@@ -454,7 +454,7 @@ def _load_tree(path: Path, sources: dict[str, str], seen: tuple[Path, ...] = ())
     try:
         data = yaml.safe_load(path.read_text()) or {}
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML: {exc}") from None
+        raise ConfigError(f"{path}: invalid YAML ({yaml_problem(exc)})") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: a config file must be a mapping of sections")
     parent_name = data.pop("inherit_from", None)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import yaml
 
-from droidw_cli.errors import UserError
+from droidw_cli.errors import UserError, yaml_problem
 
 COLUMNS = ("name", "input", "calib", "gt", "align", "config", "set")
 ALIGN_CHOICES = ("sim3", "se3", "none")
@@ -86,7 +86,7 @@ def _yaml_rows(path: Path) -> list[dict]:
     try:
         data = yaml.safe_load(path.read_text())
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ManifestError(f"{path}: not valid YAML ({_first_line(exc)})") from None
+        raise ManifestError(f"{path}: not valid YAML ({yaml_problem(exc)})") from None
     defaults: dict = {}
     if isinstance(data, dict):
         unknown = set(data) - {"sequences", "defaults"}

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from droidw_cli.errors import InputError
+from droidw_cli.errors import InputError, yaml_problem
 from droidw_cli.geometry.camera import resize_crop_intrinsics, working_size
 
 _DISTORTION_LENGTHS = (0, 4, 5)
@@ -180,7 +180,7 @@ def _parse_yaml(text: str, where: str) -> tuple[list[float], list[float]]:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise InputError(f"{where}: not valid YAML ({str(exc).splitlines()[0]})") from None
+        raise InputError(f"{where}: not valid YAML ({yaml_problem(exc)})") from None
     if not isinstance(data, dict):
         raise InputError(f"{where}: expected a YAML mapping with fx, fy, cx, cy or intrinsics")
     # "Camera.fx" / "Camera1.fx" (ORB-SLAM) → "fx"; keys are case-insensitive.
