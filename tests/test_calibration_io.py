@@ -69,6 +69,9 @@ def test_auto_returns_none():
         ("500 500 320 abc", "'abc' is not a number"),
         ("500 500 320 240\n500 500 320 240", "expected one line"),
         ("# nothing\n", "holds no numbers"),
+        ("1e9 1e9 320 240", "field of view"),  # accepted before: every pose degenerate
+        ("20 20 320 240", "fx=20 px gives a"),  # under 0.05 × 640: a wider view than a pinhole can have
+        ("500 2000 320 240", "differ by more than"),
     ],
 )
 def test_bad_text_values(tmp_path, text, message):

@@ -34,6 +34,10 @@ from droidw_cli.geometry.camera import resize_crop_intrinsics, working_size
 _DISTORTION_LENGTHS = (0, 4, 5)
 _RADTAN_NAMES = ("radial-tangential", "radtan", "plumb_bob", "pinhole-radtan")
 _YAML_SUFFIXES = (".yaml", ".yml")
+#: plausible focal lengths, × the image's larger side: fields of view from about 169° down to about 0.6°
+FOCAL_RANGE = (0.05, 100.0)
+#: at most this ratio between fx and fy (pixels are close to square)
+MAX_ASPECT = 3.0
 
 
 @dataclass(frozen=True)
@@ -86,12 +90,22 @@ class Calibration:
         return Calibration(*(float(v) for v in k))
 
     def validate(self, image_size: tuple[int, int], where: str = "calibration") -> "Calibration":
-        """Check the principal point lies in an image of ``image_size`` = (H, W); raise InputError if not."""
+        """Check the principal point lies in an image of ``image_size`` = (H, W) and the focal lengths give
+        a plausible field of view (:data:`FOCAL_RANGE`, :data:`MAX_ASPECT`); raise InputError if not."""
         h, w = image_size
         if not 0.0 <= self.cx <= w:
             raise InputError(f"{where}: cx={_fmt(self.cx)} is outside the {w}-pixel-wide image")
         if not 0.0 <= self.cy <= h:
             raise InputError(f"{where}: cy={_fmt(self.cy)} is outside the {h}-pixel-high image")
+        side = max(h, w)
+        for name, f in (("fx", self.fx), ("fy", self.fy)):
+            if not FOCAL_RANGE[0] * side <= f <= FOCAL_RANGE[1] * side:
+                fov = math.degrees(2.0 * math.atan(side / (2.0 * f)))
+                raise InputError(f"{where}: {name}={_fmt(f)} px gives a {fov:.3g}° field of view across the "
+                                 f"{side}-pixel side; expected {FOCAL_RANGE[0]:g}-{FOCAL_RANGE[1]:g} × {side} px "
+                                 f"(is the calibration for another image size?)")
+        if not 1.0 / MAX_ASPECT <= self.fx / self.fy <= MAX_ASPECT:
+            raise InputError(f"{where}: fx={_fmt(self.fx)} and fy={_fmt(self.fy)} differ by more than {MAX_ASPECT:g}×")
         return self
 
 
