@@ -19,7 +19,7 @@ from droidw_cli.errors import UserError
 COMMANDS: dict[str, tuple[str, str, str]] = {
     "track": ("droidw_cli.commands.track", "track", "Track a video or image sequence: trajectory, depth, uncertainty."),
     "eval": ("droidw_cli.commands.evaluate", "evaluate", "Evaluate a trajectory against ground truth (ATE / RPE)."),
-    "export": ("droidw_cli.commands.export", "export", "Export a run: PLY point clouds, uncertainty overlays, a rendered view."),
+    "export": ("droidw_cli.commands.export", "export", "Export a run: PLY point clouds, dynamic objects (JSON), uncertainty overlays, a rendered view."),
     "backends": ("droidw_cli.commands.backends", "backends", "List the BA backends and whether they can run here."),
     "demo": ("droidw_cli.commands.demo", "demo", "Generate a synthetic dynamic scene, track it and evaluate it."),
     "synth": ("droidw_cli.commands.synth", "synth", "Generate a synthetic dynamic-scene sequence with exact ground truth."),
