@@ -89,3 +89,65 @@ def test_static_cloud_leaves_out_the_pixels_ba_zeroed():
     assert not cloud.dynamic.any()  # the output mask stays what it was
     grown = build_cloud(run, CloudParams(dynamic_margin=1)).static.reshape(dynamic.shape)  # the margin grows 'masked' too
     assert not grown[3, 4:8, 4:8].any() and grown[3, 3, 5:7].all()
+
+
+def _save_run(folder, npz, num_kf):
+    """``npz`` as a run folder's keyframes.npz, with the keys `droidw view` also needs."""
+    folder.mkdir()
+    h, w = npz["disps"].shape[1:]
+    np.savez(folder / "keyframes.npz", index=np.arange(num_kf) * 3, work_size=np.array([h * BA_SCALE, w * BA_SCALE]),
+             **npz)
+    return folder
+
+
+def test_multiview_support_with_fewer_keyframes_than_the_radius():
+    k8 = np.array([12.0, 12.0, 7.5, 5.5])
+    for num_kf in (1, 2):  # radius 2 reaches past both ends: used to raise in torch.arange
+        plane = _plane_run(num_kf=num_kf, mover=False)
+        support = multiview_support(plane["disps"], plane["poses_c2w"], k8, radius=2, rel_tol=0.05)
+        assert support.shape == (num_kf, 12, 16)
+        assert support.max() == num_kf - 1  # one keyframe: no neighbour; two: each other
+
+
+def test_too_few_keyframes_for_min_views_is_a_user_error():
+    from droidw_cli.errors import InputError
+
+    one = _plane_run(num_kf=1, mover=False)
+    with pytest.raises(InputError, match=r"1 keyframe.*--min-views 2"):
+        build_cloud(one, CloudParams())
+    with pytest.raises(InputError, match=r"2 keyframes.*--min-views 2"):
+        build_cloud(_plane_run(num_kf=2, mover=False), CloudParams())  # at most 1 neighbour can agree
+    with pytest.raises(InputError, match=r"--min-views 5.*at most 4"):
+        build_cloud(_plane_run(), CloudParams(min_views=5))  # radius 2: 4 neighbours whatever the run's length
+    unchecked = build_cloud(one, CloudParams(min_views=0))  # asked for explicitly: the depth without the test
+    assert len(unchecked.xyz) == 12 * 16 and unchecked.static.all()
+    assert build_cloud(_plane_run(num_kf=2, mover=False), CloudParams(min_views=1)).static.sum() > 0
+
+
+@pytest.mark.parametrize("what", ["static", "dynamic", "all"])
+def test_export_ply_of_a_single_keyframe_run_fails_cleanly(tmp_path, capsys, what):
+    from cli_run import run
+
+    one = _plane_run(num_kf=1, mover=False)
+    one["dynamic"] = np.zeros(one["disps"].shape, bool)
+    one["object_ids"] = np.full(one["disps"].shape, -1, np.int32)
+    folder = _save_run(tmp_path / "run", one, 1)
+    out = tmp_path / "out.ply"
+    code, stdout, err = run(["export", "ply", str(folder), "--what", what, "--out", str(out)], capsys)
+    assert code == 2, err
+    assert err.startswith("droidw: error:") and "1 keyframe" in err and "Traceback" not in err
+    assert not out.exists() and not list(tmp_path.glob(".*tmp"))  # no file, not even a partial one
+    code, stdout, err = run(["export", "ply", str(folder), "--what", what, "--min-views", "0", "--out", str(out)],
+                            capsys)
+    assert code == 0, err
+    assert stdout.startswith(f"wrote {0 if what == 'dynamic' else 12 * 16} points")
+
+
+def test_export_ply_of_a_run_without_keyframes_fails_cleanly(tmp_path, capsys):
+    from cli_run import run
+
+    empty = {k: v[:0] for k, v in _plane_run(num_kf=1, mover=False).items() if k in ("disps", "poses_c2w")}
+    empty.update(intrinsics=_plane_run(num_kf=1, mover=False)["intrinsics"])
+    folder = _save_run(tmp_path / "run", empty, 0)
+    code, stdout, err = run(["export", "ply", str(folder), "--out", str(tmp_path / "out.ply")], capsys)
+    assert code == 2 and "no keyframes" in err and "Traceback" not in err, err

@@ -113,3 +113,50 @@ def test_dynamic_points_get_the_dynamic_colour_and_trajectory_is_drawn():
     assert near_path.sum() > 20 and not np.any(np.abs(plain.astype(int) - params.trajectory_colour).max(-1) < 40)
     with pytest.raises(ValueError, match="no points"):
         render_cloud(np.zeros((0, 3)), np.zeros((0, 3), np.uint8), poses, params)
+
+
+def test_render_of_a_single_keyframe_run_fails_cleanly(tmp_path, capsys):
+    (tmp_path / "run").mkdir()
+    np.savez(tmp_path / "run" / "keyframes.npz", **_run_npz(num_kf=1))
+    out = tmp_path / "cloud.png"
+    for what in ("static", "all"):
+        code, _, err = run(["export", "render", str(tmp_path / "run"), "--what", what, "--out", str(out)], capsys)
+        assert code == 2, err
+        assert err.startswith("droidw: error:") and "1 keyframe" in err and "Traceback" not in err
+        assert not out.exists() and not list(tmp_path.glob(".*tmp"))
+    code, stdout, err = run(["export", "render", str(tmp_path / "run"), "--min-views", "0", "--out", str(out)], capsys)
+    assert code == 0 and "rendered 192 points" in stdout and out.is_file(), err
+
+
+def _count(stdout: str) -> int:
+    """The point count of `wrote N points ...` / `rendered N points ...`."""
+    return int(stdout.split()[1])
+
+
+def test_render_draws_the_points_export_ply_writes(tmp_path, capsys):
+    """`render --what X` draws exactly the points of `ply --what X`: not the rejected ones, and only the
+    dynamic ones in the dynamic colour."""
+    npz = _run_npz()
+    npz["images"][:] = 128  # grey: any red pixel is the dynamic colour
+    npz["uncertainty"][2, 1:5, 1:5] = 30.0  # rejected for uncertainty: neither static nor dynamic
+    dynamic = np.zeros(npz["disps"].shape, bool)
+    dynamic[1, 6:10, 10:14] = True  # masked dynamic
+    npz.update(dynamic=dynamic, object_ids=np.where(dynamic, 4, -1).astype(np.int32), masked=dynamic.copy())
+    (tmp_path / "run").mkdir()
+    np.savez(tmp_path / "run" / "keyframes.npz", **npz)
+    for what in ("static", "all"):
+        code, out_ply, err = run(["export", "ply", str(tmp_path / "run"), "--what", what,
+                                  "--out", str(tmp_path / f"{what}.ply")], capsys)
+        assert code == 0, err
+        code, out_png, err = run(["export", "render", str(tmp_path / "run"), "--what", what, "--no-trajectory",
+                                  "--point-size", "1", "--out", str(tmp_path / f"{what}.png")], capsys)
+        assert code == 0, err
+        assert _count(out_png) == _count(out_ply)
+    # all = 880 static + 16 dynamic: not the uncertain block (16) nor the 4 × 12 edge-column points that
+    # leave the neighbours' views (too few views)
+    assert _count(out_ply) == 5 * 12 * 16 - 16 - 4 * 12
+    red = RenderParams().dynamic_colour
+    image = cv2.cvtColor(cv2.imread(str(tmp_path / "all.png")), cv2.COLOR_BGR2RGB).astype(int)
+    reddish = (image[..., 0] > image[..., 1] + 40) & (image[..., 0] > image[..., 2] + 40)
+    assert 0 < reddish.sum() <= 16  # the 16 dynamic points (1 px splats), not the 16 rejected ones too
+    assert np.abs(image[reddish] - red).max() < 120  # faded towards the background at most

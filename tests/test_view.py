@@ -87,3 +87,24 @@ def test_view_errors(run_dir, tmp_path, capsys, monkeypatch):
     code, _, err = run(["view", str(run_dir), "--save", str(tmp_path / "x.rrd")], capsys)
     assert code == 2 and "pip install 'droidw[view]'" in err
     assert not (tmp_path / "x.rrd").exists()
+
+
+def test_view_of_a_single_keyframe_run_fails_cleanly(tmp_path, capsys):
+    """One keyframe (a fixed camera): no multi-view map; the same clear error as `export ply`, and no file."""
+    pytest.importorskip("rerun")
+    import numpy as np
+
+    from droidw_cli.geometry.camera import BA_SCALE, unscale_intrinsics
+
+    h, w = 12, 16
+    folder = tmp_path / "run"
+    folder.mkdir()
+    np.savez(folder / "keyframes.npz", index=np.array([0]), timestamps=np.array([0.0]), poses_c2w=np.eye(4)[None],
+             disps=np.ones((1, h, w), np.float32), work_size=np.array([h * BA_SCALE, w * BA_SCALE]),
+             intrinsics=unscale_intrinsics(np.array([12.0, 12.0, (w - 1) / 2, (h - 1) / 2]), BA_SCALE),
+             images=np.full((1, 2 * h, 2 * w, 3), 128, np.uint8), uncertainty=np.full((1, h, w), 0.7, np.float32))
+    rrd = tmp_path / "out" / "run.rrd"
+    code, _, err = run(["view", str(folder), "--save", str(rrd), "--quiet"], capsys)
+    assert code == 2, err
+    assert err.startswith("droidw: error:") and "1 keyframe" in err and "Traceback" not in err
+    assert not rrd.parent.exists()  # nothing written, not even the folder

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from droidw_cli.errors import InputError
+from droidw_cli.io.outputs import check_output_file, check_output_folder
 
 
 def load_run(run_dir: Path) -> dict:
@@ -70,16 +71,12 @@ def ply(run_dir, out, what, max_uncertainty, min_views, stride):
 
     if stride < 1 or min_views < 0:
         raise InputError("--stride must be ≥ 1 and --min-views ≥ 0")
-    npz = load_run(run_dir)
-    cloud = build_cloud(npz, CloudParams(max_uncertainty=max_uncertainty, min_views=min_views, stride=stride))
     default_name = {"static": "static.ply", "dynamic": "dynamic.ply", "all": "points.ply"}[what]
     out = out or Path(default_name)
-    if what == "static":
-        part = cloud.select(cloud.static)
-    elif what == "dynamic":
-        part = cloud.select(cloud.dynamic)
-    else:
-        part = cloud.select(cloud.static | cloud.dynamic)
+    check_output_file(out)
+    npz = load_run(run_dir)
+    cloud = build_cloud(npz, CloudParams(max_uncertainty=max_uncertainty, min_views=min_views, stride=stride))
+    part = cloud.part(what)
     n = write_ply(out, part, with_time=what != "static", with_flag=what == "all")
     click.echo(f"wrote {n} points to {out}")
 
@@ -93,6 +90,7 @@ def objects(run_dir, out):
     from droidw_cli.export.objects import format_objects, objects_json
     from droidw_cli.io.trajectory import atomic_write_text
 
+    check_output_file(out)
     npz = load_run(run_dir)
     try:
         doc = objects_json(npz, run_is_metric(run_dir))
@@ -110,6 +108,7 @@ def uncertainty(run_dir, out, video):
     """Write a PNG overlay of the uncertainty u for each keyframe (with a legend)."""
     from droidw_cli.export.overlay import write_overlays
 
+    check_output_folder(out)
     npz = load_run(run_dir)
     try:
         paths = write_overlays(npz, out, video=video)
@@ -157,15 +156,16 @@ def render(run_dir, out, what, size, azimuth, elevation, zoom, point_size, no_tr
                               point_size=point_size)
     except ValueError as exc:
         raise InputError(str(exc)) from None
+    check_output_file(out)
     npz = load_run(run_dir)
     try:
         cloud = build_cloud(npz, CloudParams(max_uncertainty=max_uncertainty, min_views=min_views, stride=stride))
     except ValueError as exc:
         raise InputError(f"{run_dir}: {exc}") from None
-    part = cloud.select(cloud.static) if what == "static" else cloud
+    part = cloud.part(what)  # the points `export ply --what` writes
     if len(part.xyz) == 0:
         raise InputError(f"{run_dir}: no {what} points to render (try --what all or a larger --max-uncertainty)")
     image = render_cloud(part.xyz, part.rgb, npz["poses_c2w"], params,
-                         dynamic=None if what == "static" else ~part.static, trajectory=not no_trajectory)
+                         dynamic=None if what == "static" else part.dynamic, trajectory=not no_trajectory)
     write_png(out, image)
     click.echo(f"rendered {len(part.xyz)} points to {out} ({size[0]}x{size[1]})")

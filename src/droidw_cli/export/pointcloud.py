@@ -11,12 +11,18 @@ in ``keyframes.npz``).
   its uncertainty u is under
   ``max_uncertainty``, *and*
   several views agree on it: projected into the neighbouring keyframes
-  k ± 1 … k ± ``radius``, its disparity matches theirs (bilinearly sampled)
-  within ``rel_tol`` in at least ``min_views`` of them.
+  k ± 1 … k ± ``radius`` (those that exist), its disparity matches theirs
+  (bilinearly sampled) within ``rel_tol`` in at least ``min_views`` of them.
+  A run with too few keyframes for that test (one keyframe: a camera that
+  never moved enough to build a map) has no multi-view map: building its
+  cloud is a user error, unless ``min_views`` is lowered (0: no test).
 * **dynamic**: p ∈ M_k, tagged with its keyframe's time t and its object id
   (−1 where the mask has no tracked object).  A run without masks
   (``dynamics.mode=none``) has no M_k; its dynamic points are then the
   non-static ones.
+
+``droidw export ply``, ``export render`` and ``view`` all take their points
+from :meth:`Cloud.part`.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ import torch
 import torch.nn.functional as F
 
 from droidw_cli.ba.uncertainty import weighting_input
+from droidw_cli.errors import InputError
 from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics
 from droidw_cli.io.trajectory import atomic_write_bytes
 
@@ -65,6 +72,14 @@ class Cloud:
         return Cloud(self.xyz[mask], self.rgb[mask], self.time[mask], self.uncertainty[mask], self.static[mask],
                      self.dynamic[mask], self.object_id[mask])
 
+    def part(self, what: str) -> "Cloud":
+        """The points of ``--what`` ``static``, ``dynamic`` or ``all`` (static and dynamic: not the points
+        rejected for their uncertainty or too few agreeing views)."""
+        masks = {"static": self.static, "dynamic": self.dynamic, "all": self.static | self.dynamic}
+        if what not in masks:
+            raise ValueError(f"unknown point selection {what!r} (expected static, dynamic or all)")
+        return self.select(masks[what])
+
 
 def _backproject(disps: torch.Tensor, k8: torch.Tensor) -> torch.Tensor:
     """(K, h, w) disparities → (K, h, w, 3) camera points."""
@@ -76,8 +91,33 @@ def _backproject(disps: torch.Tensor, k8: torch.Tensor) -> torch.Tensor:
     return torch.stack([x, y, z], -1)
 
 
+def max_support(num_kf: int, radius: int) -> int:
+    """The most neighbours any point can be compared with: k ± 1 … k ± ``radius`` within the run."""
+    return max(0, min(num_kf - 1, 2 * radius))
+
+
+def check_min_views(num_kf: int, params: CloudParams, option: str | None = "--min-views") -> None:
+    """Raise :class:`InputError` when no point of a ``num_kf``-keyframe run can pass the multi-view test.
+
+    ``option`` names the command-line option that sets ``min_views`` in the message (None: the command has
+    none, so the message does not suggest it).
+    """
+    most = max_support(num_kf, params.radius)
+    if params.min_views <= most:
+        return
+    if params.min_views > 2 * params.radius:
+        raise InputError(f"{option or 'min_views'} {params.min_views} can never be met: each point is compared "
+                         f"with at most {2 * params.radius} neighbouring keyframes (±{params.radius})")
+    setting = f" ({option} {params.min_views})" if option else ""
+    lower = f", or lower {option} (0 keeps every keyframe point, unchecked)" if option else ""
+    raise InputError(f"the run has {num_kf} keyframe{'s' if num_kf != 1 else ''}, so no point can be confirmed by "
+                     f"{params.min_views} other keyframes{setting}, at most {most}: there is no multi-view map "
+                     f"(a camera that barely moves keeps one keyframe); track a longer clip with camera motion{lower}")
+
+
 def multiview_support(disps: np.ndarray, poses_c2w: np.ndarray, k8: np.ndarray, radius: int, rel_tol: float) -> np.ndarray:
-    """(K, h, w) count of neighbouring keyframes that agree with each pixel's depth."""
+    """(K, h, w) count of neighbouring keyframes that agree with each pixel's depth (at most
+    :func:`max_support`; all 0 for a single keyframe)."""
     d = torch.from_numpy(disps).double()
     kf, h, w = d.shape
     cam = _backproject(d, torch.from_numpy(k8))
@@ -85,10 +125,9 @@ def multiview_support(disps: np.ndarray, poses_c2w: np.ndarray, k8: np.ndarray, 
     world = torch.einsum("kab,khwb->khwa", c2w[:, :3, :3], cam) + c2w[:, None, None, :3, 3]
     w2c = torch.linalg.inv(c2w)
     support = torch.zeros(kf, h, w, dtype=torch.int32)
-    for off in [o for r in range(1, radius + 1) for o in (r, -r)]:  # a loop over view offsets, not pixels
+    # a loop over view offsets, not pixels; an offset of kf or more has no keyframe pair
+    for off in [o for r in range(1, min(radius, kf - 1) + 1) for o in (r, -r)]:
         src = torch.arange(max(0, -off), min(kf, kf - off))
-        if src.numel() == 0:
-            continue
         dst = src + off
         p = torch.einsum("kab,khwb->khwa", w2c[dst, :3, :3], world[src]) + w2c[dst, None, None, :3, 3]
         z = p[..., 2]
@@ -104,12 +143,17 @@ def multiview_support(disps: np.ndarray, poses_c2w: np.ndarray, k8: np.ndarray, 
 
 
 def build_cloud(npz: dict, params: CloudParams) -> Cloud:
-    """All keyframe points of a run (every ``params.stride``-th keyframe), with static flags."""
+    """All keyframe points of a run (every ``params.stride``-th keyframe), with static flags.
+
+    Raises :class:`InputError` when the run has too few keyframes for ``params.min_views``
+    (:func:`check_min_views`): an empty static cloud would hide that the test could not be run.
+    """
     disps = np.asarray(npz["disps"], dtype=np.float32)
     poses = np.asarray(npz["poses_c2w"], dtype=np.float64)
     kf, h, w = disps.shape
     if kf == 0:
-        raise ValueError("the run has no keyframes")
+        raise InputError("the run has no keyframes")
+    check_min_views(kf, params)
     k8 = scale_intrinsics(np.asarray(npz["intrinsics"], dtype=np.float64), BA_SCALE)
     support = multiview_support(disps, poses, k8, params.radius, params.rel_tol)
     unc = np.asarray(npz["uncertainty"], dtype=np.float32) if "uncertainty" in npz else np.zeros_like(disps)

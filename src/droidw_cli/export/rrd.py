@@ -133,7 +133,7 @@ def log_run(rec, run: Run, progress: bool = False, stride: int = 1) -> dict:
     rec.log("world/keyframes", rr.LineStrips3D(frustum_strips(kf_poses, k_work, (work_h, work_w), depth),
                                               colors=[FRUSTUM_COLOUR]), static=True)
     cloud = build_cloud(npz, CloudParams(stride=stride))
-    static = cloud.select(cloud.static)
+    static = cloud.part("static")
     rec.log("world/points/static", rr.Points3D(static.xyz, colors=static.rgb, radii=[-1.5]), static=True)
 
     th, tw = images.shape[1:3]
@@ -166,9 +166,18 @@ def log_run(rec, run: Run, progress: bool = False, stride: int = 1) -> dict:
             "static_points": int(len(static.xyz)), "dynamic_points": dynamic_total}
 
 
+def check_cloud(run: Run, stride: int = 1) -> None:
+    """Raise :class:`InputError`, before anything is written or spawned, when the run has too few keyframes
+    for the static cloud's multi-view test (as `droidw export ply` does)."""
+    from droidw_cli.export.pointcloud import CloudParams, check_min_views
+
+    check_min_views(len(run.npz["disps"]), CloudParams(stride=stride), option=None)
+
+
 def save_rrd(run: Run, path: Path, progress: bool = False, stride: int = 1) -> dict:
     """Write ``run`` to an .rrd file atomically (no viewer, works headless); returns the counts."""
     rr = require_rerun()
+    check_cloud(run, stride)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.parent / f".{path.name}.{os.getpid()}.tmp"
     rec = rr.RecordingStream("droidw")
@@ -191,6 +200,7 @@ def show(run: Run, progress: bool = False, stride: int = 1) -> dict:
     if sys.platform.startswith("linux") and headless:
         raise UserError("no display to open the rerun viewer on: write a file with --save run.rrd "
                         "and open it with `rerun run.rrd` where there is one")
+    check_cloud(run, stride)
     rec = rr.RecordingStream("droidw")
     rec.spawn()
     counts = log_run(rec, run, progress, stride)
