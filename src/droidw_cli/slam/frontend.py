@@ -33,16 +33,14 @@ Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distanc
   detected for the initial keyframes after initialisation and for each new
   keyframe after its first ``iters1`` iterations.
 
-The keyframe buffer, the edge cache, θ and the intrinsics live on the BA
-backend's device (``backend.device``); images and DIS flow stay on the host,
-and each edge's target and confidence are copied to the device once, when
-they are cached.  The new edges of a keyframe are matched, each with its
-epipolar distance map, in one
-:meth:`~droidw_cli.correspondence.base.CorrespondenceSource.match_all` call,
-on as many threads as there are cores when the source allows it; the pair
-(k, k − 1), which needs no initial flow, usually comes ready from the scout
-(:mod:`droidw_cli.slam.scout`), which matched it on another thread during
-the previous keyframe's BA.
+The keyframe buffer, the edge cache, θ and the intrinsics live on the BA backend's device
+(``backend.device``); images and DIS flow stay on the host, and each edge's target and confidence
+are copied to the device once, when they are cached.  The new edges of a keyframe are matched, each
+with its epipolar distance map, in one
+:meth:`~droidw_cli.correspondence.base.CorrespondenceSource.match_all` call, on as many threads as
+there are cores when the source allows it; the pair (k, k − 1), which needs no initial flow, usually
+comes ready from the scout (:mod:`droidw_cli.slam.scout`), which matched it on another thread
+during the previous keyframe's BA.
 """
 
 from __future__ import annotations
@@ -306,11 +304,9 @@ class Frontend:
         edges = self.cache.edge_set(pairs, offset=lo)
         fixed = 1 if lo == 0 else min(2, hi - lo - 1)
         params = self.params
-        if params.optimize_focal != "none":
-            if not (focal and focal_observable(self.buffer.poses[lo:hi], self.cfg.calib)):
-                params = self._fixed_focal
-            else:
-                self.focal_estimated = True
+        if params.optimize_focal != "none" and not (focal and focal_observable(self.buffer.poses[lo:hi], self.cfg.calib)):
+            params = self._fixed_focal
+        self.focal_estimated |= params.optimize_focal != "none"
         cost = run_window(self.backend, self.buffer, lo, hi, edges, params, self.shared, iters, fixed,
                           robust_sigma=self.fcfg.robust_sigma)
         if params.optimize_focal != "none":
