@@ -36,6 +36,8 @@ def view(run_dir, save_path, stride, quiet):
     run = load_run_folder(run_dir)
     progress = not quiet and sys.stderr.isatty()
     counts = save_rrd(run, save_path, progress, stride) if save_path is not None else show(run, progress, stride)
+    if counts.get("note"):
+        click.echo(f"droidw: warning: {counts['note']}", err=True)
     click.echo(f"{counts['frames']} poses, {counts['keyframes']} keyframes, {counts['static_points']} static and "
                f"{counts['dynamic_points']} dynamic points")
     if save_path is not None:

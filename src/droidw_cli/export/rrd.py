@@ -132,9 +132,20 @@ def log_run(rec, run: Run, progress: bool = False, stride: int = 1) -> dict:
     rec.log("world/trajectory", rr.LineStrips3D([run.poses_c2w[:, :3, 3]], colors=[TRAJECTORY_COLOUR]), static=True)
     rec.log("world/keyframes", rr.LineStrips3D(frustum_strips(kf_poses, k_work, (work_h, work_w), depth),
                                               colors=[FRUSTUM_COLOUR]), static=True)
-    cloud = build_cloud(npz, CloudParams(stride=stride))
-    static = cloud.part("static")
-    rec.log("world/points/static", rr.Points3D(static.xyz, colors=static.rgb, radii=[-1.5]), static=True)
+    try:
+        cloud = build_cloud(npz, CloudParams(stride=stride))
+        note = None
+    except InputError:  # too few keyframes for a multi-view map (a fixed camera): show the rest
+        n = len(disps)
+        cloud, note = None, (f"no point cloud: the run has {n} keyframe{'s' if n != 1 else ''}, too few for a "
+                             f"multi-view map (a camera that barely moves keeps one); the trajectory and images "
+                             f"are shown")
+        rec.log("run/note", rr.TextDocument(note), static=True)
+    static_points = 0
+    if cloud is not None:
+        static = cloud.part("static")
+        static_points = len(static.xyz)
+        rec.log("world/points/static", rr.Points3D(static.xyz, colors=static.rgb, radii=[-1.5]), static=True)
 
     th, tw = images.shape[1:3]
     sx, sy = tw / work_w, th / work_h
@@ -156,28 +167,20 @@ def log_run(rec, run: Run, progress: bool = False, stride: int = 1) -> dict:
     for k in tqdm(range(len(kf_index)), desc="keyframes", unit="kf", disable=not progress, leave=False):
         at(kf_index[k], kf_times[k])
         rec.log("world/camera/image", rr.Image(images[k]))
-        dyn = cloud.dynamic & (cloud.time == kf_times[k])
-        rec.log("world/points/dynamic", rr.Points3D(cloud.xyz[dyn], colors=[DYNAMIC_COLOUR], radii=[-2.0]))
-        dynamic_total += int(dyn.sum())
+        if cloud is not None:
+            dyn = cloud.dynamic & (cloud.time == kf_times[k])
+            rec.log("world/points/dynamic", rr.Points3D(cloud.xyz[dyn], colors=[DYNAMIC_COLOUR], radii=[-2.0]))
+            dynamic_total += int(dyn.sum())
         if unc is not None:
             rec.log("uncertainty", rr.Image(cv2.cvtColor(blend(images[k], unc[k], lo, hi), cv2.COLOR_BGR2RGB)))
             rec.log("stats/mean_uncertainty", rr.Scalars(float(np.mean(unc[k]))))
     return {"frames": int(len(run.poses_c2w)), "keyframes": int(len(kf_index)),
-            "static_points": int(len(static.xyz)), "dynamic_points": dynamic_total}
-
-
-def check_cloud(run: Run, stride: int = 1) -> None:
-    """Raise :class:`InputError`, before anything is written or spawned, when the run has too few keyframes
-    for the static cloud's multi-view test (as `droidw export ply` does)."""
-    from droidw_cli.export.pointcloud import CloudParams, check_min_views
-
-    check_min_views(len(run.npz["disps"]), CloudParams(stride=stride), option=None)
+            "static_points": int(static_points), "dynamic_points": dynamic_total, "note": note}
 
 
 def save_rrd(run: Run, path: Path, progress: bool = False, stride: int = 1) -> dict:
     """Write ``run`` to an .rrd file atomically (no viewer, works headless); returns the counts."""
     rr = require_rerun()
-    check_cloud(run, stride)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.parent / f".{path.name}.{os.getpid()}.tmp"
     rec = rr.RecordingStream("droidw")
@@ -200,7 +203,6 @@ def show(run: Run, progress: bool = False, stride: int = 1) -> dict:
     if sys.platform.startswith("linux") and headless:
         raise UserError("no display to open the rerun viewer on: write a file with --save run.rrd "
                         "and open it with `rerun run.rrd` where there is one")
-    check_cloud(run, stride)
     rec = rr.RecordingStream("droidw")
     rec.spawn()
     counts = log_run(rec, run, progress, stride)
