@@ -22,7 +22,7 @@ in ``keyframes.npz``).
   non-static ones.
 
 ``droidw export ply``, ``export render`` and ``view`` all take their points
-from :meth:`Cloud.part`.
+from :meth:`Cloud.part` (``view`` shows a run too short for the test without points).
 """
 
 from __future__ import annotations
@@ -96,23 +96,18 @@ def max_support(num_kf: int, radius: int) -> int:
     return max(0, min(num_kf - 1, 2 * radius))
 
 
-def check_min_views(num_kf: int, params: CloudParams, option: str | None = "--min-views") -> None:
-    """Raise :class:`InputError` when no point of a ``num_kf``-keyframe run can pass the multi-view test.
-
-    ``option`` names the command-line option that sets ``min_views`` in the message (None: the command has
-    none, so the message does not suggest it).
-    """
+def check_min_views(num_kf: int, params: CloudParams) -> None:
+    """Raise :class:`InputError` when no point of a ``num_kf``-keyframe run can pass the multi-view test."""
     most = max_support(num_kf, params.radius)
     if params.min_views <= most:
         return
     if params.min_views > 2 * params.radius:
-        raise InputError(f"{option or 'min_views'} {params.min_views} can never be met: each point is compared "
+        raise InputError(f"--min-views {params.min_views} can never be met: each point is compared "
                          f"with at most {2 * params.radius} neighbouring keyframes (±{params.radius})")
-    setting = f" ({option} {params.min_views})" if option else ""
-    lower = f", or lower {option} (0 keeps every keyframe point, unchecked)" if option else ""
     raise InputError(f"the run has {num_kf} keyframe{'s' if num_kf != 1 else ''}, so no point can be confirmed by "
-                     f"{params.min_views} other keyframes{setting}, at most {most}: there is no multi-view map "
-                     f"(a camera that barely moves keeps one keyframe); track a longer clip with camera motion{lower}")
+                     f"{params.min_views} other keyframes (--min-views {params.min_views}), at most {most}: there is "
+                     f"no multi-view map (a camera that barely moves keeps one keyframe); track a longer clip with "
+                     f"camera motion, or lower --min-views (0 keeps every keyframe point, unchecked)")
 
 
 def multiview_support(disps: np.ndarray, poses_c2w: np.ndarray, k8: np.ndarray, radius: int, rel_tol: float) -> np.ndarray:
