@@ -244,3 +244,19 @@ def test_a_new_object_needs_min_new_of_the_view():
     blob = _box(40, 20, 9, 10)
     assert [o.area for o in DynamicObjectTracker(min_new=0.01).update(blob)] == [90]
     assert DynamicObjectTracker(min_new=0.02).update(blob) == []
+
+
+def test_a_partly_matched_object_takes_its_other_piece_instead_of_a_new_id():
+    """A track whose prediction found only a sliver (under ``occluded`` of it) takes the nearest piece that
+    would otherwise start a new track, under the centre rule's area and jump limits (stopgo RGB-D: a walker
+    split by a depth step got a new id for its other half)."""
+    tr = DynamicObjectTracker()
+    (a,) = tr.update(_box(20, 20, 12, 12))
+    sliver, piece = _box(20, 20, 3, 12), _box(34, 21, 8, 10)  # 36 px on the prediction, 80 px beside it
+    (b,) = tr.update(sliver | piece)
+    assert b.id == a.id and b.area == 36 + 80 and tr._next_id == 1
+    tr = DynamicObjectTracker()
+    (a,) = tr.update(_box(20, 20, 12, 12))
+    far = _box(60, 21, 8, 10)  # 40 px from the centre, beyond 20 % of the width: a new object
+    objs = tr.update(sliver | far)
+    assert sorted(o.area for o in objs if o.id == a.id) == [36] and len(objs) == 2

@@ -42,7 +42,11 @@ predicted depth δ'_t; else c'_t = c_t, δ'_t = δ_t.
    unclaimed component containing round(c'_t), else the one whose centre is
    nearest to c'_t within ``max_jump · w``, kept only if its area is at most
    ``max_growth`` · a_t, its centre moved at most ``max_jump · w`` and half of
-   its pixels fit the track.  Then re-identification by appearance (large
+   its pixels fit the track.  A track whose claims gave it fewer than
+   ``occluded`` · |P_t| pixels also takes, by the same rule, the nearest
+   unclaimed component that would start a new track (step 5): a walker that a
+   depth step cut in two keeps one id (stopgo RGB-D: 3 → 2 id switches, no
+   other preset changed).  Then re-identification by appearance (large
    image motions, a missed keyframe): the unclaimed component of at least
    ``min_new`` of the view, within ``reid_reach · w`` of c'_t, with an area
    ratio within ``reid_area`` either way, half its pixels fitting, and the
@@ -324,8 +328,9 @@ class DynamicObjectTracker:
                          claimed: np.ndarray) -> None:
         """Step 3, ADD-SLAM's centre prompt, guarded by its area and jump rules."""
         h, w = f.labels.shape
-        for tid, (c1, _, _) in chosen.items():
-            if tid in pixels or f.n == 0:
+        for tid, (c1, pred, _) in chosen.items():
+            weak = tid in pixels and pixels[tid].sum() < self.occluded * pred.sum()
+            if (tid in pixels and not weak) or f.n == 0:
                 continue
             px, py = int(round(c1[0])), int(round(c1[1]))
             c = -1
@@ -334,6 +339,8 @@ class DynamicObjectTracker:
             else:
                 dist = np.hypot(f.centres[:, 0] - c1[0], f.centres[:, 1] - c1[1])
                 dist[claimed] = np.inf
+                if weak:  # a partly seen track only takes a piece that would otherwise start a new track
+                    dist[f.areas < self.min_new * h * w] = np.inf
                 best = int(np.argmin(dist))
                 if dist[best] <= self.max_jump * w:
                     c = best
@@ -344,7 +351,7 @@ class DynamicObjectTracker:
             if (f.areas[c] <= self.max_growth * live[tid].area and jump <= self.max_jump * w
                     and (comp & fits[tid]).sum() >= 0.5 * f.areas[c]):
                 claimed[c] = True
-                pixels[tid] = comp
+                pixels[tid] = pixels[tid] | comp if weak else comp
 
     def _fallback_colour(self, f: _Frame, live, chosen, fits, pixels: dict[int, np.ndarray],
                          claimed: np.ndarray) -> None:
