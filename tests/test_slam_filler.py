@@ -14,7 +14,7 @@ from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics
 from droidw_cli.io.prepare import FramePreparer
 from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.frontend import Frontend
-from droidw_cli.slam.poses import compose
+from droidw_cli.slam.poses import compose, interpolate
 from droidw_cli.synth import SynthConfig, build_scene
 
 A, B = 120, 132  # two keyframes of the generator's static hand-held walk, 12 frames apart
@@ -102,6 +102,33 @@ def test_removed_keyframe_becomes_a_frame_of_its_predecessor(walk):
         expected = compose(before[k], s_inv)
         assert torch.allclose(after[k], expected, atol=1e-4) or torch.allclose(after[k], -expected, atol=1e-4)
     assert float((_centre(before[mid]) - _centre(frames[mid][2])).norm()) < 1e-4  # the removed keyframe keeps its pose
+
+
+def test_a_removed_keyframe_merges_its_gap_and_stays_a_knot_of_the_interpolation(walk):
+    """Removal right after a new keyframe: the removed keyframe's frames wait for the predecessor's gap
+    (solved later against settled keyframes), whose starting poses pass through the removed keyframe's pose."""
+    frames, _ = walk
+    mid = (A + B) // 2
+    fe, _ = _frontend(walk, [A, mid, B])
+    bump = torch.tensor([0.05, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])  # the removed keyframe 5 cm off the A-B line
+    fe.buffer.poses[1] = compose(bump, fe.buffer.poses[1])
+    kept_mid = fe.buffer.poses[1].clone()
+    filler = TrajectoryFiller(fe, load_config("default", ["filler.iters=0"]).filler)
+    for k in range(A + 1, B):
+        if k != mid:
+            filler.add_frame(k, k / 30.0, A if k < mid else mid, frames[k][0])
+    filler.keyframe_removed(1)
+    fe._remove(1)
+    assert sorted(p.frame_index for p in filler._pending[A]) == [k for k in range(A + 1, B) if k != mid]
+    poses = filler.finish()
+    ends = {A: frames[A][2], mid: kept_mid, B: frames[B][2]}
+    for k in (mid - 2, mid + 3):
+        lo, hi = (A, mid) if k < mid else (mid, B)
+        alpha = torch.tensor([(k - lo) / (hi - lo)])
+        piecewise = interpolate(ends[lo][None], ends[hi][None], alpha)[0]
+        straight = interpolate(ends[A][None], ends[B][None], torch.tensor([(k - A) / (B - A)]))[0]
+        assert float((_centre(poses[k]) - _centre(piecewise)).norm()) < 1e-4
+        assert float((_centre(poses[k]) - _centre(straight)).norm()) > 0.01
 
 
 def test_uninitialised_frames_stay_at_their_keyframe(walk):
