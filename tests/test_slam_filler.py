@@ -10,6 +10,7 @@ import torch
 from droidw_cli.ba.registry import get_backend
 from droidw_cli.config import load_config
 from droidw_cli.correspondence import get_correspondence_source
+from droidw_cli.errors import ConfigError
 from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics
 from droidw_cli.io.prepare import FramePreparer
 from droidw_cli.slam.filler import TrajectoryFiller
@@ -213,3 +214,20 @@ def test_a_refined_pose_may_leave_the_interpolation_only_by_a_share_of_the_basel
     bounded = centres("filler.max_departure=0.02")
     departure = (bounded - interpolated).norm(dim=1)
     assert float(departure.max()) <= 0.02 * baseline + 1e-6
+
+
+def test_the_refined_share_blends_between_min_gain_and_blend_gain(walk):
+    """λ is 1 at or below min_gain, 0 at or above blend_gain, linear between; blend_gain ≤ min_gain is a hard cut."""
+    fe, _ = _frontend(walk, [A, B])
+    start = torch.ones(6)
+    final = torch.tensor([0.1, 0.4, 0.5, 0.6, 0.8, 1.2])
+    soft = TrajectoryFiller(fe, load_config("default", ["filler.min_gain=0.4", "filler.blend_gain=0.8"]).filler)
+    assert torch.allclose(soft._refined_share(final, start), torch.tensor([1.0, 1.0, 0.75, 0.5, 0.0, 0.0]))
+    hard = TrajectoryFiller(fe, load_config("default", ["filler.min_gain=0.5", "filler.blend_gain=0"]).filler)
+    assert hard._refined_share(final, start).tolist() == [1.0, 1.0, 0.0, 0.0, 0.0, 0.0]
+    assert soft._refined_share(torch.zeros(1), torch.zeros(1)).tolist() == [0.0]  # nothing measured: interpolate
+
+
+def test_filler_gains_must_not_be_negative():
+    with pytest.raises(ConfigError, match="min_gain"):
+        load_config("default", ["filler.min_gain=-0.1"])

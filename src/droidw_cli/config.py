@@ -232,21 +232,29 @@ class FillerConfig:
 
     A gap's frames are solved once its anchor keyframe is ``lag`` keyframes
     old, by ``iters`` motion-only IRLS iterations with a Cauchy weight of scale
-    ``robust_sigma`` grid px; a refined pose is kept only where it brings the
-    robust cost below ``min_gain`` of the interpolation's, and leaves the interpolated
-    camera centre by at most ``max_departure`` of the keyframe baseline.
+    ``robust_sigma`` grid px.  With ρ the ratio of the refined robust cost to the
+    interpolation's, the frame takes the refined pose where ρ ≤ ``min_gain``, the
+    interpolation where ρ ≥ ``blend_gain``, and the geodesic blend between them in
+    between (``blend_gain`` ≤ ``min_gain``: the refined pose only below ``min_gain``);
+    a refined camera centre that leaves the interpolated one by more than
+    ``max_departure`` of the keyframe baseline is not used.
     """
 
     iters: int = 3
     lag: int = 2
     robust_sigma: float = 0.25  # grid px
-    min_gain: float = 0.5  # a refined pose must bring the robust cost below this share of the interpolation's
+    min_gain: float = 0.4  # cost ratio at and below which the refined pose is taken whole
+    blend_gain: float = 0.8  # cost ratio at and above which the interpolation is kept
     uncertainty: bool = True  # weight the keyframes' pixels by their uncertainty
     # a refined camera centre may leave the interpolated one by at most this share of the gap's keyframe
     # baseline (0: any).  Isolated failed refinements (1-2.5 cm off among mm-accurate neighbours) on the
     # near-still wobble: 0.5 took it 0.36 → 0.33 cm monocular, 0.61 → 0.39 cm RGB-D (SE(3)); walk,
     # walk-static, stopgo, rotate unchanged to 0.01 cm (RGB-D stopgo 0.36 → 0.35); 0.25: RGB-D stopgo 0.37
     max_departure: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.min_gain < 0 or self.blend_gain < 0 or self.max_departure < 0 or self.robust_sigma <= 0:
+            raise ValueError("filler.min_gain, blend_gain and max_departure must be >= 0, robust_sigma > 0")
 
 
 #: the dynamic-mask modes of ``dynamics.mode``
