@@ -230,14 +230,12 @@ class BackendConfig:
 class FillerConfig:
     """Poses for non-keyframes, online, from the motion filter's flow (:mod:`droidw_cli.slam.filler`).
 
-    A gap's frames are solved once its anchor keyframe is ``lag`` keyframes
-    old, by ``iters`` motion-only IRLS iterations with a Cauchy weight of scale
-    ``robust_sigma`` grid px.  With ρ the ratio of the refined robust cost to the
-    interpolation's, the frame takes the refined pose where ρ ≤ ``min_gain``, the
-    interpolation where ρ ≥ ``blend_gain``, and the geodesic blend between them in
-    between (``blend_gain`` ≤ ``min_gain``: the refined pose only below ``min_gain``);
-    a refined camera centre that leaves the interpolated one by more than
-    ``max_departure`` of the keyframe baseline is not used.
+    A gap's frames are solved once its anchor keyframe is ``lag`` keyframes old, by ``iters``
+    motion-only IRLS iterations (Cauchy scale ``robust_sigma`` grid px).  With ρ the refined robust
+    cost over the interpolation's, a frame takes the refined pose where ρ ≤ ``min_gain``, the
+    interpolation where ρ ≥ ``blend_gain``, their geodesic blend between (a hard cut at ``min_gain``
+    if ``blend_gain`` ≤ ``min_gain``); a refined camera centre that leaves the interpolated one by
+    more than ``max_departure`` of the keyframe baseline is not used.
     """
 
     iters: int = 3
@@ -246,10 +244,8 @@ class FillerConfig:
     min_gain: float = 0.4  # cost ratio at and below which the refined pose is taken whole
     blend_gain: float = 0.8  # cost ratio at and above which the interpolation is kept
     uncertainty: bool = True  # weight the keyframes' pixels by their uncertainty
-    # a refined camera centre may leave the interpolated one by at most this share of the gap's keyframe
-    # baseline (0: any).  Isolated failed refinements (1-2.5 cm off among mm-accurate neighbours) on the
-    # near-still wobble: 0.5 took it 0.36 → 0.33 cm monocular, 0.61 → 0.39 cm RGB-D (SE(3)); walk,
-    # walk-static, stopgo, rotate unchanged to 0.01 cm (RGB-D stopgo 0.36 → 0.35); 0.25: RGB-D stopgo 0.37
+    # share of the baseline (0: any).  Wobble (1-2.5 cm failed refinements): 0.5: 0.36 → 0.33 cm mono, 0.61 → 0.39
+    # RGB-D (SE(3)); the other presets unchanged to 0.01 cm (RGB-D stopgo 0.36 → 0.35); 0.25: RGB-D stopgo 0.37
     max_departure: float = 0.5
 
     def __post_init__(self) -> None:

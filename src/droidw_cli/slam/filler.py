@@ -182,8 +182,7 @@ class TrajectoryFiller:
         self._relative = AnchorTable()  # frame index → its poses relative to its gap's keyframes
         self._stored = 0
         self._targets = AheadTargets(frontend.correspondence)  # the flows a → t and b → t, on a worker
-        self._knots: dict[int, list[int]] = {}  # anchor frame index → removed keyframes merged into its gap
-        self._stamps: dict[int, float] = {}  # timestamps of those keyframes
+        self._knots: dict[int, dict[int, float]] = {}  # anchor frame index → {removed keyframe in its gap: timestamp}
 
     # ---------------------------------------------------------------- feeding
     def add_frame(self, frame_index: int, timestamp: float, anchor: int, image: np.ndarray) -> None:
@@ -206,8 +205,7 @@ class TrajectoryFiller:
         if self.fe.initialised and (len(buf) - 2) - (k - 1) < self.cfg.lag:
             frames = self._pending.pop(fr, [])
             self._pending.setdefault(prev, []).extend(frames)
-            self._knots.setdefault(prev, []).extend(self._knots.pop(fr, []) + [fr])
-            self._stamps[fr] = buf.timestamps[k]
+            self._knots.setdefault(prev, {}).update({**self._knots.pop(fr, {}), fr: buf.timestamps[k]})
             if self.cfg.iters > 0:
                 for p in frames:
                     if p.image is not None:
@@ -301,7 +299,7 @@ class TrajectoryFiller:
         """Solve the gap after keyframe k (buffer index) and keep its frames' relative poses."""
         buf = self.fe.buffer
         frames = self._pending.pop(buf.frame_index[k], [])
-        knots = {f: self._stamps.pop(f) for f in self._knots.pop(buf.frame_index[k], [])}
+        knots = self._knots.pop(buf.frame_index[k], {})
         if not frames:
             return
         self._stored -= sum(p.image is not None for p in frames)
