@@ -27,6 +27,7 @@ bench: install
 	$(PY) benchmarks/ba_bench.py
 	$(PY) benchmarks/track_bench.py
 	$(PY) benchmarks/dynamic_bench.py
+	$(PY) benchmarks/flow_bench.py
 
 clean:
 	rm -rf $(VENV) build dist droidw-demo .pytest_cache
