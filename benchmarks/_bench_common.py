@@ -40,6 +40,17 @@ def track_source(source, calibration, overrides: list[str], backend: str = "cpu"
     return result, time.perf_counter() - t
 
 
+def cached_sequence(cfg, name: str) -> Path:
+    """The TUM-style folder of synthetic config ``cfg`` (preset ``name``) in ``benchmarks/.cache``,
+    rendered on first use."""
+    from droidw_cli.synth.writer import write_sequence
+
+    folder = HERE / ".cache" / f"{name}-seed{cfg.seed}-{cfg.frames}"
+    if not (folder / "rgb.txt").exists():
+        write_sequence(cfg, folder, progress=False, overwrite=True)
+    return folder
+
+
 def peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 

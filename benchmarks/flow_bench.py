@@ -37,17 +37,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _bench_common import print_table  # noqa: E402
+from _bench_common import cached_sequence, print_table  # noqa: E402
 
-CACHE = Path(__file__).resolve().parent / ".cache"
 SIGMA = 1.0 / 8  # the Cauchy scale: 1 working-resolution px, in grid px
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    """(N, 3) → (N, 3, 3) cross-product matrices [v]×."""
-    z = np.zeros(len(v))
-    return np.stack([np.stack([z, -v[:, 2], v[:, 1]], -1), np.stack([v[:, 2], z, -v[:, 0]], -1),
-                     np.stack([-v[:, 1], v[:, 0], z], -1)], 1)
 
 
 def _exp_se3(xi: np.ndarray) -> np.ndarray:
@@ -67,6 +59,10 @@ def solve_motion(points: np.ndarray, target: np.ndarray, intrinsics: np.ndarray,
     Projection π(X) = (fx X/Z + cx, fy Y/Z + cy); Gauss-Newton on T ← exp(ξ) T with
     ∂X'/∂ξ = [−[X']×, I] and ∂π/∂X' = [[fx/Z, 0, −fx X/Z²], [0, fy/Z, −fy Y/Z²]].
     """
+    import torch
+
+    from droidw_cli.geometry.lie import skew
+
     fx, fy, cx, cy = intrinsics
     pose = np.asarray(start, dtype=np.float64).copy()
     for _ in range(iters):
@@ -76,7 +72,7 @@ def solve_motion(points: np.ndarray, target: np.ndarray, intrinsics: np.ndarray,
         jp = np.zeros((len(x), 2, 3))
         jp[:, 0, 0], jp[:, 0, 2] = fx / z, -fx * x[:, 0] / z**2
         jp[:, 1, 1], jp[:, 1, 2] = fy / z, -fy * x[:, 1] / z**2
-        j = np.concatenate([jp @ -_skew(x), jp], axis=2).reshape(-1, 6)
+        j = np.concatenate([jp @ -skew(torch.from_numpy(x)).numpy(), jp], axis=2).reshape(-1, 6)
         w = np.repeat(1.0 / (1.0 + (np.linalg.norm(r, axis=1) / SIGMA) ** 2), 2)
         step = np.linalg.solve(j.T @ (j * w[:, None]) + 1e-9 * np.eye(6), -j.T @ (w * r.ravel()))
         pose = _exp_se3(step) @ pose
@@ -106,18 +102,6 @@ def induced_flow(depth: np.ndarray, intrinsics: np.ndarray, rel: np.ndarray) -> 
     return np.where((depth > 0)[..., None], flow, 0.0).astype(np.float32)
 
 
-def _sequence(preset: str, seed: int):
-    """(folder, SynthConfig) of a cached realistic sequence, rendered on first use."""
-    from droidw_cli.synth import SynthConfig
-    from droidw_cli.synth.writer import write_sequence
-
-    cfg = SynthConfig.preset(preset, seed=seed)
-    folder = CACHE / f"{preset}-seed{cfg.seed}-{cfg.frames}"
-    if not (folder / "rgb.txt").exists():
-        write_sequence(cfg, folder, progress=False, overwrite=True)
-    return folder, cfg
-
-
 def _listed(index: Path) -> list[str]:
     """The file names of a TUM-style list (``timestamp filename`` lines after ``#`` comments)."""
     return [line.split()[1] for line in index.read_text().splitlines() if line.strip() and not line.startswith("#")]
@@ -134,7 +118,10 @@ def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], targ
     from droidw_cli.io.prepare import FramePreparer
     from droidw_cli.io.trajectory import read_tum
 
-    folder, cfg = _sequence(preset, seed)
+    from droidw_cli.synth import SynthConfig
+
+    cfg = SynthConfig.preset(preset, seed=seed)
+    folder = cached_sequence(cfg, preset)
     poses = read_tum(folder / "groundtruth.txt").poses
     files = {kind: _listed(folder / f"{kind}.txt") for kind in ("rgb", "depth", "mask")}
     n_frames = len(files["rgb"])

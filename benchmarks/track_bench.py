@@ -26,9 +26,8 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _bench_common import peak_mb, print_table, run_case_subprocess, track_source  # noqa: E402
+from _bench_common import cached_sequence, peak_mb, print_table, run_case_subprocess, track_source  # noqa: E402
 
-CACHE = Path(__file__).resolve().parent / ".cache"
 STAGES = ("decode", "motion_filter", "features", "flow", "ba", "global_ba", "filler")
 PRESETS = ("walk", "walk-static", "wobble", "rotate", "stopgo", "fixed")
 
@@ -43,17 +42,13 @@ def one(args: argparse.Namespace) -> None:
     from droidw_cli.io.trajectory import Trajectory
     from droidw_cli.synth import SynthConfig
     from droidw_cli.synth.source import SynthSource
-    from droidw_cli.synth.writer import write_sequence
 
     over = {"seed": args.seed} | ({"frames": args.frames} if args.frames else {})
     cfg = SynthConfig.preset(args.preset, **over)
     if args.stream:
         source = SynthSource(cfg)
     else:
-        folder = CACHE / f"{args.preset}-seed{cfg.seed}-{cfg.frames}"
-        if not (folder / "rgb.txt").exists():
-            write_sequence(cfg, folder, progress=False, overwrite=True)
-        source = open_source(folder)
+        source = open_source(cached_sequence(cfg, args.preset))
     calib = Calibration(*(float(v) for v in cfg.intrinsics))
     result, seconds = track_source(source, calib, list(args.set), args.backend, args.config)
     ts, poses = _ground_truth(cfg)
