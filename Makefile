@@ -15,7 +15,8 @@ install: $(PY)
 	# torch first: 2.13.0 resolves to the local CPU wheel (any other pin pulls CUDA).
 	$(PIP) install -q torch==2.13.0
 	# the optional extras too (Ray for `droidw batch`, rerun for `droidw view`), so that `make test` covers them
-	$(PIP) install -q -e ".[test,ray,view]" -e backends/cpu -e backends/cuda
+	# constraints.txt pins the builds the README's figures were measured with (OpenCV moves them)
+	$(PIP) install -q -c constraints.txt -e ".[test,ray,view]" -e backends/cpu -e backends/cuda
 
 test: install
 	$(PY) -m pytest -q $(PYTEST_ARGS)
