@@ -1,5 +1,6 @@
 """benchmarks/flow_bench.py: its motion-only solver recovers the true translation from an exact flow,
-and reads a flow whose parallax is compressed as a shorter translation."""
+reads a flow whose parallax is compressed as a shorter translation, and with the rotation held at the
+truth reads that compression itself."""
 
 from __future__ import annotations
 
@@ -31,8 +32,10 @@ def _scene():
     return depth, rel, bench.backproject(grid_depth, K_GRID)
 
 
-def _translation_scale(flow, rel, points):
-    est = bench.solve_motion(points, flow_to_target(flow).reshape(-1, 2).astype(np.float64), K_GRID, np.eye(4))
+def _translation_scale(flow, rel, points, start=None, translation_only=False):
+    start = np.eye(4) if start is None else start
+    est = bench.solve_motion(points, flow_to_target(flow).reshape(-1, 2).astype(np.float64), K_GRID, start,
+                             translation_only=translation_only)
     return np.linalg.norm(est[:3, 3]) / np.linalg.norm(rel[:3, 3])
 
 
@@ -49,3 +52,17 @@ def test_a_flow_with_compressed_parallax_reads_as_a_shorter_translation():
     full = bench.induced_flow(depth, K_WORK, rel)
     compressed = rot + 0.95 * (full - rot)  # the translation's share of the flow 5 % short
     assert _translation_scale(compressed, rel, points) < 0.97
+
+
+def test_with_the_true_rotation_the_translation_reads_the_parallax_scale():
+    depth, rel, points = _scene()
+    rotation_only = rel.copy()
+    rotation_only[:3, 3] = 0.0
+    rot = bench.induced_flow(depth, K_WORK, rotation_only)
+    full = bench.induced_flow(depth, K_WORK, rel)
+    for share in (1.0, 0.95):
+        scale = _translation_scale(rot + share * (full - rot), rel, points, start=rotation_only, translation_only=True)
+        assert abs(scale - share) < 0.01
+    held = bench.solve_motion(points, flow_to_target(full).reshape(-1, 2).astype(np.float64), K_GRID, rotation_only,
+                              translation_only=True)
+    np.testing.assert_allclose(held[:3, :3], rotation_only[:3, :3], atol=1e-12)  # the rotation does not move
