@@ -44,25 +44,24 @@ def test_the_solver_recovers_the_translation_from_the_induced_flow():
     assert abs(_translation_scale(bench.induced_flow(depth, K_WORK, rel), rel, points) - 1.0) < 2e-3
 
 
-def test_a_flow_with_compressed_parallax_reads_as_a_shorter_translation():
+def _parallax_share(share: float):
+    """(rel, points, rotation-only pose, flow whose translational part is ``share`` of the true one)."""
     depth, rel, points = _scene()
     rotation_only = rel.copy()
     rotation_only[:3, 3] = 0.0
     rot = bench.induced_flow(depth, K_WORK, rotation_only)
-    full = bench.induced_flow(depth, K_WORK, rel)
-    compressed = rot + 0.95 * (full - rot)  # the translation's share of the flow 5 % short
+    return rel, points, rotation_only, rot + share * (bench.induced_flow(depth, K_WORK, rel) - rot)
+
+
+def test_a_flow_with_compressed_parallax_reads_as_a_shorter_translation():
+    rel, points, _, compressed = _parallax_share(0.95)  # the translation's share of the flow 5 % short
     assert _translation_scale(compressed, rel, points) < 0.97
 
 
 def test_with_the_true_rotation_the_translation_reads_the_parallax_scale():
-    depth, rel, points = _scene()
-    rotation_only = rel.copy()
-    rotation_only[:3, 3] = 0.0
-    rot = bench.induced_flow(depth, K_WORK, rotation_only)
-    full = bench.induced_flow(depth, K_WORK, rel)
     for share in (1.0, 0.95):
-        scale = _translation_scale(rot + share * (full - rot), rel, points, start=rotation_only, translation_only=True)
-        assert abs(scale - share) < 0.01
-    held = bench.solve_motion(points, flow_to_target(full).reshape(-1, 2).astype(np.float64), K_GRID, rotation_only,
+        rel, points, rotation_only, flow = _parallax_share(share)
+        assert abs(_translation_scale(flow, rel, points, start=rotation_only, translation_only=True) - share) < 0.01
+    held = bench.solve_motion(points, flow_to_target(flow).reshape(-1, 2).astype(np.float64), K_GRID, rotation_only,
                               translation_only=True)
     np.testing.assert_allclose(held[:3, :3], rotation_only[:3, :3], atol=1e-12)  # the rotation does not move
