@@ -7,7 +7,8 @@ import torch
 
 from droidw_cli.ba.registry import get_backend
 from droidw_cli.config import load_config
-from droidw_cli.slam.frontend import Frontend, grid_disparity, seed_disparity
+from droidw_cli.slam.depth_prior import grid_disparity, seed_disparity
+from droidw_cli.slam.frontend import Frontend
 
 GRID = (6, 8)
 K8 = torch.tensor([10.0, 10.0, 3.5, 2.5])

@@ -146,6 +146,8 @@ class FrontendConfig:
     init_iters: int = 40
     radius: int = 2
     window: int = 25
+    window_span: int = 0  # frames: the window grows (to window_max keyframes) until it reaches this far back (Frontend._window_start)
+    window_max: int = 35
     max_edges: int = 75
     flow_thresh: float = 16.0  # grid px
     keyframe_thresh: float = 3.0  # grid px
@@ -162,9 +164,7 @@ class FrontendConfig:
     iters2: int = 2
     velocity_damping: float = 0.5
     proximity_stride: int = 2  # the proximity candidates' frame distance averages every s-th grid pixel (s² cheaper)
-    # a new keyframe's edge pair to the previous one is matched on the prefetch thread as soon as the motion
-    # filter flags it, beside the previous keyframe's BA (slam/scout.py; the same result, only sooner)
-    match_ahead: bool = True
+    match_ahead: bool = True  # match a new keyframe's pair (k, k − 1) on the prefetch thread, beside k − 1's BA (slam/scout.py)
     robust_sigma: float = 1.0  # grid px: Cauchy reweighting of the window BA's residuals (0 = off); rotate 2.82 → 1.07 cm with backend.robust_sigma 0.5
 
     def __post_init__(self) -> None:
@@ -182,7 +182,7 @@ class FrontendConfig:
         for name, value in counts.items():
             if value < 1:
                 raise ValueError(f"frontend.{name} must be >= 1, got {value}")
-        for name in ("iters2", "nms", "proximity_max", "keyframe_thresh", "init_parallax"):
+        for name in ("iters2", "nms", "proximity_max", "keyframe_thresh", "init_parallax", "window_span"):
             if getattr(self, name) < 0:
                 raise ValueError(f"frontend.{name} must be >= 0, got {getattr(self, name)}")
         if not self.flow_thresh > 0:
@@ -351,9 +351,8 @@ class TrackConfig:
             raise ValueError(f"threads must be >= 0 (0: one less than the usable cores), got {self.threads}")
         # The uncertainty section is the single source of truth for the BA's copy.
         object.__setattr__(self, "ba", dataclasses.replace(self.ba, uncertainty=self.uncertainty))
-        if self.backend.horizon < self.frontend.window:
-            raise ValueError(f"backend.horizon ({self.backend.horizon}) must be at least frontend.window "
-                             f"({self.frontend.window}): the window BA needs its keyframes' features")
+        if self.backend.horizon < self.frontend.window:  # the window (and window_max) stays inside the horizon
+            raise ValueError("backend.horizon must be >= frontend.window: the window BA needs its keyframes' features")
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)

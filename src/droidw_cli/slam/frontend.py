@@ -59,6 +59,7 @@ from droidw_cli.correspondence.base import Correspondence, MatchCall
 from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask
 from droidw_cli.dynamics.inloop import KeyframeMasks, observed_disparity
 from droidw_cli.slam import graph
+from droidw_cli.slam.depth_prior import seed_disparity
 from droidw_cli.slam.distance import frame_distance, transfer_disparity
 from droidw_cli.slam.evidence import EVIDENCE_CHANNELS, evidence_maps
 from droidw_cli.slam.focal import clamp_focal, focal_observable
@@ -74,52 +75,10 @@ PROXIMITY_RECENT = 5
 UNCERTAINTY_CHUNK = 32
 
 
-
-def grid_disparity(depth: np.ndarray, grid: tuple[int, int], min_depth: float = 0.1) -> torch.Tensor:
-    """A working-size depth map (metres, 0 = invalid) as disparity on the 1/8 grid, (h, w) float32.
-
-    Grid cell (u, v) is centred on working pixel (8u + 3.5, 8v + 3.5) (the
-    intrinsics' pixel-centre convention, :func:`~droidw_cli.geometry.camera.scale_intrinsics`),
-    so its disparity is the mean of 1/D over the four pixels around that centre,
-
-        D̄(u, v) = ¼ Σ_{a, b ∈ {3, 4}} 1 / D(8u + a, 8v + b),
-
-    exact where disparity is affine in the image (any plane), and 0 unless all
-    four are valid (D > ``min_depth``), so no depth is invented across holes.
-    Taking the block's first pixel instead (OpenCV's INTER_NEAREST) reads the
-    depth 3.5 px up and to the left: on a floor seen from 1.5 m that is a few
-    per cent too far, a scale bias of the whole RGB-D reconstruction.
-    """
-    h, w = grid
-    d = np.asarray(depth, dtype=np.float32)
-    quad = np.stack([d[a : a + 8 * h : 8, b : b + 8 * w : 8] for a in (3, 4) for b in (3, 4)])
-    valid = (quad > min_depth).all(axis=0)
-    disp = np.where(valid, (1.0 / np.maximum(quad, min_depth)).mean(axis=0), 0.0)
-    return torch.from_numpy(disp.astype(np.float32))
-
-
-def seed_disparity(fallback: torch.Tensor | float, prior: torch.Tensor | None, hw: tuple[int, int],
-                   device: torch.device | str = "cpu") -> torch.Tensor:
-    """Initial disparity of a keyframe: the sensor's where it has one, ``fallback`` elsewhere.
-
-    With a depth prior D (disparity, 0 = invalid) the seed is
-
-        d₀(p) = D(p)          where D(p) > 0,
-        d₀(p) = fallback(p)   otherwise,
-
-    ``fallback`` being the transferred disparity (or a constant).  Without a
-    prior d₀ = fallback.  This matters for the scale: the BA's gauge is fixed
-    by the first keyframe (t0 = 1) during initialisation and by two fixed
-    keyframes in every later window, so the metric scale has to be present in
-    the disparities *before* the first iterations; the weak prior term
-    γ_d (d − D)² alone cannot pull a whole mis-scaled reconstruction along the
-    (LM-damped) scale direction, and two fixed poses then freeze the wrong scale.
-    """
-    base = torch.as_tensor(fallback, dtype=torch.float32, device=device).expand(*hw)
-    if prior is None:
-        return base.clone()
-    prior = prior.to(device=device, dtype=torch.float32).reshape(*hw)
-    return torch.where(prior > 0, prior, base)
+def window_reach(f, horizon: int) -> int:
+    """The most keyframes a window holds: ``window``, or with ``window_span`` up to ``window_max``
+    (:meth:`Frontend._window_start`), inside the backend's ``horizon``."""
+    return max(f.window, min(f.window_max, horizon) if f.window_span else 0)
 
 
 def _epipolar_of(c: Correspondence) -> np.ndarray | None:
@@ -134,6 +93,7 @@ class Frontend:
                  grid: tuple[int, int], intrinsics8: torch.Tensor, feature_channels: int):
         self.cfg = cfg
         self.fcfg = cfg.frontend
+        self.reach = window_reach(cfg.frontend, cfg.backend.horizon)
         self.params = params
         self.backend = backend
         self.correspondence = correspondence
@@ -385,7 +345,7 @@ class Frontend:
     def _update(self, k: int) -> int:
         """Window BA for the new keyframe k; returns its index after a possible removal."""
         f = self.fcfg
-        lo = max(0, k - f.window + 1)
+        lo = self._window_start(k)
         pairs = graph.radius_pairs(k, lo, f.radius) + self._proximity(k, lo)
         self._match(pairs, use_prior=True)
         self._window_ba(lo, k, f.iters1)
@@ -399,6 +359,16 @@ class Frontend:
         self._detect([k])
         self._window_ba(lo, k, f.iters2)
         return k
+
+    def _window_start(self, k: int) -> int:
+        """The window's first keyframe: of the newest ``window`` keyframes, widened by older ones (to at
+        most ``window_max``) until it reaches ``window_span`` input frames back.  Under fast rotation
+        keyframes come every few frames, and 25 of them span too short a path to hold the scale."""
+        f, frames = self.fcfg, self.buffer.frame_index
+        lo = max(0, k - f.window + 1)
+        while lo > 0 and k - lo + 1 < self.reach and frames[k] - frames[lo] < f.window_span:
+            lo -= 1
+        return lo
 
     def _window_ba(self, lo: int, k: int, iters: int) -> None:
         f = self.fcfg
@@ -491,9 +461,9 @@ class Frontend:
 
     def _evict(self, k: int) -> None:
         """Drop the working-resolution images and epipolar maps of keyframes that left the window."""
-        for old in [i for i in self.images if i <= k - self.fcfg.window]:
+        for old in [i for i in self.images if i <= k - self.reach]:
             del self.images[old]
-        for key in [key for key in self._epipolar if key[0] <= k - self.fcfg.window]:
+        for key in [key for key in self._epipolar if key[0] <= k - self.reach]:
             del self._epipolar[key]
-        for key in [key for key in self._raw if key[0] <= k - self.fcfg.window]:
+        for key in [key for key in self._raw if key[0] <= k - self.reach]:
             del self._raw[key]

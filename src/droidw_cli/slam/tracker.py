@@ -35,7 +35,8 @@ from droidw_cli.io.prefetch import prefetched
 from droidw_cli.io.prepare import FramePreparer
 from droidw_cli.slam.backend import GlobalBackend
 from droidw_cli.slam.filler import TrajectoryFiller
-from droidw_cli.slam.frontend import Frontend, grid_disparity
+from droidw_cli.slam.depth_prior import grid_disparity
+from droidw_cli.slam.frontend import Frontend
 from droidw_cli.slam.motion_filter import MotionFilter
 from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.scout import Scout
