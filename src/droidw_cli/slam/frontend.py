@@ -15,7 +15,9 @@ Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distanc
 * Update for each later keyframe k, which starts at the damped
   constant-velocity pose and its predecessor's disparity warped into it:
   edges to its ``radius`` predecessors plus proximity edges of the newest
-  keyframes inside the window (frame distance under ``flow_thresh``, with
+  keyframes inside the window (the newest ``window`` keyframes, widened up to
+  ``window_max`` while they reach fewer than ``window_span`` input frames back:
+  fast rotation) (frame distance under ``flow_thresh``, with
   non-maximum suppression ``nms``); edges older than ``max_age`` BA
   iterations leave the window; at most ``max_edges``.  ``iters1``
   iterations, then *keyframe removal*: when the two keyframes before k are
@@ -54,7 +56,7 @@ import torch
 from droidw_cli.ba.interface import BABackend
 from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.ba.params import BAParams
-from droidw_cli.config import TrackConfig
+from droidw_cli.config import FrontendConfig, TrackConfig
 from droidw_cli.correspondence.base import Correspondence, MatchCall
 from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask
 from droidw_cli.dynamics.inloop import KeyframeMasks, observed_disparity
@@ -75,7 +77,7 @@ PROXIMITY_RECENT = 5
 UNCERTAINTY_CHUNK = 32
 
 
-def window_reach(f, horizon: int) -> int:
+def window_reach(f: FrontendConfig, horizon: int) -> int:
     """The most keyframes a window holds: ``window``, or with ``window_span`` up to ``window_max``
     (:meth:`Frontend._window_start`), inside the backend's ``horizon``."""
     return max(f.window, min(f.window_max, horizon) if f.window_span else 0)
