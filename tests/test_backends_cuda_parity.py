@@ -61,7 +61,9 @@ def test_ba_step_equal(backends, problem, params):
     # compare the updates (not the states) to 1e-4 relative
     assert _close(r2.state.poses - state.poses.cuda(), r1.state.poses - state.poses)
     assert _close(r2.state.disps - state.disps.cuda(), r1.state.disps - state.disps)
-    assert _close(r2.state.intrinsics, r1.state.intrinsics, 1e-6)
+    # the focal is an update too: in the shared-focal case it moves 57.6 -> 38.4 px in one step, and the
+    # CPU reference itself read 38.39640 here and 38.3967 on the H100 host (torch 2.11), 8e-6 of the value
+    assert _close(r2.state.intrinsics - state.intrinsics.cuda(), r1.state.intrinsics - state.intrinsics)
 
 
 @pytest.mark.parametrize("per_keyframe", [True, False])

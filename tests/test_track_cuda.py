@@ -3,8 +3,15 @@
 Issue 10's acceptance row: on a 90-frame synthetic clip the CUDA backend runs
 through the whole pipeline (uncertainty, evidence maps, epipolar masks, global
 BA, filler) and its ATE is within 5 % of the CPU backend's on the same input.
-The two runs differ only by float round-off, which a whole track amplifies a
-little; the 1 mm floor keeps a near-perfect run from failing on noise.
+The two runs differ only by float round-off, but a whole track amplifies it:
+keyframe choices and removals are discrete, so a different summation order
+can change them.  The CPU backend alone shows how much.  On this clip, at the
+default settings, it read 0.51 cm with 1 torch thread and 0.44 cm with 2
+(2026-11-24).  On the clip that this test used before (a 30 × 40 grid and
+halved keyframe thresholds, about 1.4 cm), the CPU reference read 1.36 cm on
+one machine and 1.46 cm on the H100 host, and CUDA read 1.25 cm there.  So the
+clip is tracked at the default settings, where the error is near 0.5 cm and
+the 1 mm floor covers what the summation order alone moves.
 """
 
 from __future__ import annotations
@@ -21,10 +28,6 @@ from droidw_cli.synth import SynthConfig, write_sequence
 
 pytestmark = [pytest.mark.cuda, pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")]
 
-# the short-clip settings of test_track_dynamic.py: a 30 × 40 grid, keyframes at half the default spacing
-SETTINGS = ("io.target_area=76800", "motion_filter.thresh=1.5", "frontend.keyframe_thresh=1.5")
-
-
 @pytest.fixture(scope="module")
 def clip(tmp_path_factory):
     cfg = SynthConfig.preset("dynamic", width=320, height=240, frames=90, seed=1, camera_speed=1.5)
@@ -33,8 +36,6 @@ def clip(tmp_path_factory):
 
 def _track(seq, out, backend):
     args = ["track", str(seq), "--out", str(out), "--quiet", "--backend", backend]
-    for s in SETTINGS:
-        args += ["--set", s]
     try:
         main(args)
     except SystemExit as exc:

@@ -183,7 +183,7 @@ void launch(const LinearizeConfig& cfg, const LinearizeInputs& in, int height, i
   const int hw = height * width;
   const int64_t edges = in.ii.size(0);
   const int tiles = (hw + kTilePixels - 1) / kTilePixels;
-  auto partials = torch::empty({edges, tiles, Accum<KJ>::kSize}, in.disps.options().dtype(at::kDouble));
+  const torch::Tensor partials = torch::empty({edges, tiles, Accum<KJ>::kSize}, in.disps.options().dtype(at::kDouble));
   auto stream = c10::cuda::getCurrentCUDAStream();
   const dim3 grid(tiles, static_cast<unsigned>(edges));
   linearize_kernel<KJ><<<grid, kThreads, 0, stream>>>(
