@@ -157,7 +157,7 @@ def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], targ
         for name in flows:
             t0 = time.perf_counter()
             start = induced_flow(depth, k_work, rel) if seeded or name == "gt" else None
-            flow = start if name == "gt" else create_dis(name).calc(gray_i, gray_j, start)
+            flow = start if name == "gt" else create_dis(*flow_spec(name)).calc(gray_i, gray_j, start)
             ms = 1000 * (time.perf_counter() - t0)
             target = flow_to_target(flow).reshape(-1, 2)[static].astype(np.float64)
             norm = max(np.linalg.norm(rel[:3, 3]), 1e-12)
@@ -175,19 +175,26 @@ def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], targ
     return rows
 
 
+def flow_spec(name: str) -> tuple[str, float]:
+    """``"medium@2"`` → (``"medium"``, 2.0): a DIS preset and its smoothness α (``correspondence.smoothness``)."""
+    preset, _, alpha = name.partition("@")
+    return preset, float(alpha or 0.0)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--presets", nargs="+", default=["walk", "rotate"])
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--gaps", type=int, nargs="+", default=[4, 8])
     ap.add_argument("--pairs", type=int, default=12)
-    ap.add_argument("--flows", nargs="+", default=["gt", "medium", "fine", "fast"])
+    ap.add_argument("--flows", nargs="+", default=["gt", "medium", "fine", "fast"],
+                    help="gt or DIS presets; PRESET@A sets the smoothness α (e.g. medium@2)")
     ap.add_argument("--seeded", action="store_true", help="start DIS from the flow the true pose induces")
     ap.add_argument("--target-area", type=int, default=196608, help="working size in pixels (default: 384 × 512)")
     args = ap.parse_args()
     from droidw_cli.correspondence.dis import PRESETS
 
-    unknown = [f for f in args.flows if f != "gt" and f not in PRESETS]
+    unknown = [f for f in args.flows if f != "gt" and flow_spec(f)[0] not in PRESETS]
     if unknown:
         ap.error(f"unknown flow(s) {unknown}: gt or one of {', '.join(PRESETS)}")
     rows = [row for preset in args.presets for gap in args.gaps

@@ -9,6 +9,7 @@ import torch
 
 from droidw_cli.config import CorrespondenceConfig
 from droidw_cli.correspondence import Correspondence, DISCorrespondence, grid_coordinates
+from droidw_cli.correspondence.dis import to_gray
 from droidw_cli.errors import ConfigError
 
 H, W = 256, 320
@@ -165,7 +166,8 @@ def test_bad_inputs_are_rejected(image):
         dis.match_many([])
 
 
-@pytest.mark.parametrize("field, value", [("preset", "slow"), ("quick_preset", "slow"), ("fb_thresh", 0.0), ("photo_sigma", -1.0)])
+@pytest.mark.parametrize("field, value", [("preset", "slow"), ("quick_preset", "slow"), ("fb_thresh", 0.0), ("photo_sigma", -1.0),
+                                          ("smoothness", -1.0)])
 def test_bad_config_is_a_config_error(field, value):
     with pytest.raises(ConfigError, match=field):
         DISCorrespondence(CorrespondenceConfig(**{field: value}))
@@ -232,3 +234,20 @@ def test_an_error_in_a_worker_job_reaches_the_caller():
 
     with pytest.raises(RuntimeError, match="derive failed"):
         DISCorrespondence().match_all(calls, derive)
+
+
+def test_smoothness_sets_the_edges_dis_alpha_and_leaves_the_fillers_flow_alone(image):
+    """correspondence.smoothness replaces MEDIUM's variational α (20) for the edges' flow only."""
+    from droidw_cli.correspondence.dis import create_dis
+
+    assert create_dis("medium").getVariationalRefinementAlpha() == pytest.approx(20.0)
+    assert create_dis("medium", 2.0).getVariationalRefinementAlpha() == pytest.approx(2.0)
+    dis = DISCorrespondence(CorrespondenceConfig(preset="medium", quick_preset="medium", smoothness=2.0))
+    shifted = np.roll(image, (3, 5), axis=(0, 1))
+    dis.match(image, shifted)
+    dis.quick_target(image, shifted)
+    alphas = {key: obj.getVariationalRefinementAlpha() for key, obj in dis._local.dis.items()}
+    assert alphas == {("medium", False, 2.0): pytest.approx(2.0), ("medium", False, 0.0): pytest.approx(20.0)}
+    sharp = dis.flow(to_gray(image), to_gray(shifted))
+    smooth = DISCorrespondence(CorrespondenceConfig(preset="medium")).flow(to_gray(image), to_gray(shifted))
+    assert not np.array_equal(sharp, smooth)  # the setting reaches the flow

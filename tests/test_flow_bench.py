@@ -65,3 +65,8 @@ def test_with_the_true_rotation_the_translation_reads_the_parallax_scale():
     held = bench.solve_motion(points, flow_to_target(flow).reshape(-1, 2).astype(np.float64), K_GRID, rotation_only,
                               translation_only=True)
     np.testing.assert_allclose(held[:3, :3], rotation_only[:3, :3], atol=1e-12)  # the rotation does not move
+
+
+def test_a_flow_name_may_carry_the_dis_smoothness():
+    assert bench.flow_spec("medium") == ("medium", 0.0)
+    assert bench.flow_spec("medium@2") == ("medium", 2.0)

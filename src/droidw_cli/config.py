@@ -105,6 +105,7 @@ class CorrespondenceConfig:
     name: str = "dis"
     preset: str = "medium"
     quick_preset: str = "fine"  # the filler's one-way flow keyframe → frame (quick_target)
+    smoothness: float = 0.0  # DIS variational refinement α of the edges' flow (0: the preset's own, 20 for medium)
     fb_thresh: float = 1.0  # forward-backward consistency threshold, full-res px
     photo_sigma: float = 0.1  # photometric agreement scale (intensity in [0, 1])
     # px at the working resolution: no weight for pixels (or their targets) this close to the

@@ -36,12 +36,21 @@ PRESETS = {
 }
 
 
-def create_dis(name: str):
-    """An OpenCV DIS optical flow object for a preset name of :data:`PRESETS`."""
+def create_dis(name: str, smoothness: float = 0.0):
+    """An OpenCV DIS optical flow object for a preset name of :data:`PRESETS`.
+
+    ``smoothness`` > 0 replaces the weight α of the smoothness term of DIS's
+    variational refinement (the preset's own is 20).  A smaller α shrinks the
+    flow less across depth edges: with the rotation held at the truth, the
+    walk's translation read from MEDIUM's flow goes from 0.9968 to 0.9987 of
+    the truth at α = 2 (``benchmarks/flow_bench.py``, 8-frame pairs).
+    """
     preset, overrides = PRESETS[name]
     dis = cv2.DISOpticalFlow_create(preset)
     for key, value in overrides.items():
         getattr(dis, "set" + key)(value)
+    if smoothness > 0:
+        dis.setVariationalRefinementAlpha(float(smoothness))
     return dis
 
 # mean_flow runs FAST DIS at 1/2 resolution: about 3 ms at 448×592 here.  ULTRAFAST at 1/4
@@ -83,11 +92,14 @@ class DISCorrespondence(CorrespondenceSource):
             raise ConfigError(f"correspondence.photo_sigma must be > 0, got {cfg.photo_sigma}")
         if not cfg.border_margin >= 0:
             raise ConfigError(f"correspondence.border_margin must be >= 0, got {cfg.border_margin}")
+        if not cfg.smoothness >= 0:
+            raise ConfigError(f"correspondence.smoothness must be >= 0 (0: the preset's own), got {cfg.smoothness}")
         self.cfg = cfg
         self._local = threading.local()  # this thread's DIS objects (an OpenCV DIS object is not thread-safe)
 
-    def _dis_of(self, name: str, seeded: bool = False):
-        """This thread's DIS object of preset ``name``, for flows with (``seeded``) or without an initial flow.
+    def _dis_of(self, name: str, seeded: bool = False, smoothness: float = 0.0):
+        """This thread's DIS object of preset ``name`` and ``smoothness`` (:func:`create_dis`), for flows
+        with (``seeded``) or without an initial flow.
 
         OpenCV's DIS keeps state between calls: a call without an initial flow that follows one
         with an initial flow starts from a leftover of it (up to 4 px difference on a walk pair
@@ -95,16 +107,18 @@ class DISCorrespondence(CorrespondenceSource):
         nothing between calls, so each result depends on its inputs only, whichever thread runs it.
         """
         objects = self._local.__dict__.setdefault("dis", {})
-        if (name, seeded) not in objects:
-            objects[name, seeded] = create_dis(name)
-        return objects[name, seeded]
+        key = (name, seeded, smoothness)
+        if key not in objects:
+            objects[key] = create_dis(name, smoothness)
+        return objects[key]
 
     def flow(self, gray_i: np.ndarray, gray_j: np.ndarray, init_flow: np.ndarray | None = None) -> np.ndarray:
         """(H, W, 2) float32 DIS flow gray_i → gray_j, optionally started from ``init_flow``."""
         if init_flow is None:
-            return np.ascontiguousarray(self._dis_of(self.cfg.preset).calc(gray_i, gray_j, None), dtype=np.float32)
+            dis = self._dis_of(self.cfg.preset, smoothness=self.cfg.smoothness)
+            return np.ascontiguousarray(dis.calc(gray_i, gray_j, None), dtype=np.float32)
         start = np.ascontiguousarray(init_flow, dtype=np.float32).copy()
-        flow = self._dis_of(self.cfg.preset, seeded=True).calc(gray_i, gray_j, start)
+        flow = self._dis_of(self.cfg.preset, seeded=True, smoothness=self.cfg.smoothness).calc(gray_i, gray_j, start)
         return np.ascontiguousarray(flow, dtype=np.float32)
 
     def _check(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None) -> np.ndarray | None:
