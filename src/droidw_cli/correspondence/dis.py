@@ -40,10 +40,10 @@ def create_dis(name: str, smoothness: float = 0.0):
     """An OpenCV DIS optical flow object for a preset name of :data:`PRESETS`.
 
     ``smoothness`` > 0 replaces the weight α of the smoothness term of DIS's
-    variational refinement (the preset's own is 20).  A smaller α shrinks the
-    flow less across depth edges: with the rotation held at the truth, the
-    walk's translation read from MEDIUM's flow goes from 0.9968 to 0.9987 of
-    the truth at α = 2 (``benchmarks/flow_bench.py``, 8-frame pairs).
+    variational refinement (the preset's own is 20).  A smaller α smooths less
+    across depth edges: with the rotation held at the truth, the walk's
+    translation read from MEDIUM's flow goes from 0.9968 to 0.9987 of the
+    truth at α = 2 (``benchmarks/flow_bench.py``, 8-frame pairs).
     """
     preset, overrides = PRESETS[name]
     dis = cv2.DISOpticalFlow_create(preset)
