@@ -24,6 +24,8 @@ only at first use (:mod:`droidw_backend_cuda.build`).
 
 from __future__ import annotations
 
+import os
+
 import torch
 from torch import Tensor
 
@@ -57,6 +59,10 @@ class CudaBackend(CpuBackend):
     def __init__(self, device: str | torch.device = "cuda") -> None:
         super().__init__()
         self._device = torch.device(device)
+        # Same input, same output, as on the CPU: the shared solve's index_add_ sums with atomics on CUDA
+        # unless torch is asked for its deterministic kernels (cuBLAS then needs a fixed workspace).
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+        torch.use_deterministic_algorithms(True, warn_only=True)
 
     @classmethod
     def availability(cls) -> tuple[bool, str]:

@@ -15,7 +15,7 @@ __global__ void similarity_kernel(SimilarityConfig cfg, int hw, int height, int 
                                   const int64_t* __restrict__ ii, const int64_t* __restrict__ jj,
                                   const float* __restrict__ omega, const float* __restrict__ feats,
                                   const float* __restrict__ u, const float* __restrict__ target,
-                                  float* __restrict__ grad, float* __restrict__ loss) {
+                                  double* __restrict__ grad, double* __restrict__ loss) {
   const int e = blockIdx.y;
   const int p = blockIdx.x * blockDim.x + threadIdx.x;
   float t = 0.0f;
@@ -50,10 +50,10 @@ __global__ void similarity_kernel(SimilarityConfig cfg, int hw, int height, int 
     const float uij = b.w[0] * uj[b.idx[0]] + b.w[1] * uj[b.idx[1]] + b.w[2] * uj[b.idx[2]] + b.w[3] * uj[b.idx[3]];
     t = valid ? cfg.gamma_data * omega[e] * (1.0f - sim) / (ui * uij) : 0.0f;
     if (t != 0.0f) {
-      atomicAdd(grad + fi * hw + p, -t / ui);
+      atomicAdd(grad + fi * hw + p, static_cast<double>(-t / ui));
       const float gij = -t / uij;
 #pragma unroll
-      for (int c = 0; c < 4; ++c) atomicAdd(grad + fj * hw + b.idx[c], b.w[c] * gij);
+      for (int c = 0; c < 4; ++c) atomicAdd(grad + fj * hw + b.idx[c], static_cast<double>(b.w[c] * gij));
     }
   }
   __shared__ float partial[kThreads / kWarp];
@@ -61,7 +61,7 @@ __global__ void similarity_kernel(SimilarityConfig cfg, int hw, int height, int 
   if (threadIdx.x % kWarp == 0) partial[threadIdx.x / kWarp] = s;
   __syncthreads();
   if (threadIdx.x == 0) {
-    float total = 0.0f;
+    double total = 0.0;
     for (int w = 0; w < static_cast<int>(blockDim.x) / kWarp; ++w) total += partial[w];
     atomicAdd(loss, total);
   }
@@ -94,8 +94,10 @@ std::vector<torch::Tensor> similarity_cuda(const SimilarityConfig& cfg, const Si
   const int n = static_cast<int>(in.features.size(0)), channels = static_cast<int>(in.features.size(1));
   const int height = static_cast<int>(in.features.size(2)), width = static_cast<int>(in.features.size(3));
   const int hw = height * width;
-  auto grad = torch::zeros({n, static_cast<int64_t>(hw)}, in.u.options());
-  auto loss = torch::zeros({1}, in.u.options());
+  // float64 sums: the atomics' order varies from run to run, and float64 sums of float32 terms
+  // rounded once to float32 give the same result in any order (but for ties at a rounding boundary)
+  auto grad = torch::zeros({n, static_cast<int64_t>(hw)}, in.u.options().dtype(at::kDouble));
+  auto loss = torch::zeros({1}, in.u.options().dtype(at::kDouble));
   const int64_t edges = in.ii.size(0);
   if (edges > 0) {
     const dim3 grid((hw + kThreads - 1) / kThreads, static_cast<unsigned>(edges));
@@ -104,10 +106,10 @@ std::vector<torch::Tensor> similarity_cuda(const SimilarityConfig& cfg, const Si
         cfg, hw, height, width, channels, in.rel.data_ptr<float>(), in.disps.data_ptr<float>(),
         in.ii.data_ptr<int64_t>(), in.jj.data_ptr<int64_t>(), in.omega.data_ptr<float>(),
         in.features.data_ptr<float>(), in.u.data_ptr<float>(),
-        with_target ? in.target.data_ptr<float>() : nullptr, grad.data_ptr<float>(), loss.data_ptr<float>());
+        with_target ? in.target.data_ptr<float>() : nullptr, grad.data_ptr<double>(), loss.data_ptr<double>());
     C10_CUDA_KERNEL_LAUNCH_CHECK();
   }
-  return {grad, loss};
+  return {grad.to(at::kFloat), loss.to(at::kFloat)};
 }
 
 }  // namespace droidw
