@@ -231,3 +231,30 @@ def test_the_refined_share_blends_between_min_gain_and_blend_gain(walk):
 def test_filler_gains_must_not_be_negative():
     with pytest.raises(ConfigError, match="min_gain"):
         load_config("default", ["filler.min_gain=-0.1"])
+
+
+def test_smoothing_spreads_a_single_departure_over_its_neighbours():
+    """One pass of [1 2 1]/4 over the departures Log(G_t G_int,t⁻¹), zero at the gap's keyframes."""
+    from droidw_cli.slam.filler import smooth_departures
+    from droidw_cli.slam.poses import log_departure, retract
+
+    torch.manual_seed(0)
+    init = pp.randn_SE3(5, sigma=0.3).tensor()
+    spike = torch.zeros(5, 6)
+    spike[2] = torch.tensor([0.02, -0.01, 0.03, 0.004, -0.002, 0.003])
+    poses = retract(spike, init)
+    assert torch.allclose(log_departure(poses, init), spike, atol=1e-6)
+    out = log_departure(smooth_departures(init, poses, 1, closed=True), init)
+    assert torch.allclose(out, torch.stack([0 * spike[2], spike[2] / 4, spike[2] / 2, spike[2] / 4, 0 * spike[2]]), atol=1e-6)
+    assert torch.equal(smooth_departures(init, poses, 0, closed=True), poses)  # off
+    edge = torch.zeros(5, 6)
+    edge[4] = spike[2]
+    open_end = log_departure(smooth_departures(init, retract(edge, init), 1, closed=False), init)
+    assert torch.allclose(open_end[4], 0.75 * spike[2], atol=1e-6)  # an open gap's last frame repeats itself
+    assert torch.allclose(open_end[3], 0.25 * spike[2], atol=1e-6)
+    assert torch.allclose(smooth_departures(init, init, 2, closed=True), init, atol=1e-6)  # nothing to smooth
+
+
+def test_filler_smoothing_passes_must_not_be_negative():
+    with pytest.raises(ConfigError, match="smooth"):
+        load_config("default", ["filler.smooth=-1"])

@@ -236,7 +236,7 @@ class FillerConfig:
     cost over the interpolation's, a frame takes the refined pose where ρ ≤ ``min_gain``, the
     interpolation where ρ ≥ ``blend_gain``, their geodesic blend between (a hard cut at ``min_gain``
     if ``blend_gain`` ≤ ``min_gain``); a refined camera centre that leaves the interpolated one by
-    more than ``max_departure`` of the keyframe baseline is not used.
+    more than ``max_departure`` of the keyframe baseline is not used.  ``smooth``: passes of [1 2 1]/4 over the gap's departures.
     """
 
     iters: int = 3
@@ -245,13 +245,13 @@ class FillerConfig:
     min_gain: float = 0.4  # cost ratio at and below which the refined pose is taken whole
     blend_gain: float = 0.8  # cost ratio at and above which the interpolation is kept
     uncertainty: bool = True  # weight the keyframes' pixels by their uncertainty
-    # share of the baseline (0: any).  Wobble (1-2.5 cm failed refinements): 0.5: 0.36 → 0.33 cm mono, 0.61 → 0.39
-    # RGB-D (SE(3)); the other presets unchanged to 0.01 cm (RGB-D stopgo 0.36 → 0.35); 0.25: RGB-D stopgo 0.37
+    # share of the baseline (0: any).  Wobble (1-2.5 cm failed refinements): 0.5: 0.36 → 0.33 cm mono, 0.61 → 0.39 RGB-D (SE(3)); the rest within 0.01 cm
     max_departure: float = 0.5
+    smooth: int = 1  # passes (0: off); README "What the filler adds to the error"
 
     def __post_init__(self) -> None:
-        if self.min_gain < 0 or self.blend_gain < 0 or self.max_departure < 0 or self.robust_sigma <= 0:
-            raise ValueError("filler.min_gain, blend_gain and max_departure must be >= 0, robust_sigma > 0")
+        if min(self.min_gain, self.blend_gain, self.max_departure, self.smooth) < 0 or self.robust_sigma <= 0:
+            raise ValueError("filler.min_gain, blend_gain, max_departure and smooth must be >= 0, robust_sigma > 0")
 
 
 #: the dynamic-mask modes of ``dynamics.mode``

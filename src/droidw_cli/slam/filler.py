@@ -36,7 +36,9 @@ for all frames of the gap at once:
    (Sim(3)) 0.174 → 0.151, wobble unchanged (0.240; a cut at 0.8: 0.301).  A refined camera
    centre that leaves the interpolated one by more than ``max_departure`` of
    the distance between the gap's keyframes is a failed refinement and is not
-   kept (single frames 1-2.5 cm off on the near-still wobble: 0.61 → 0.39 cm RGB-D).
+   kept (single frames 1-2.5 cm off on the near-still wobble: 0.61 → 0.39 cm RGB-D);
+5. ``smooth`` passes of [1 2 1]/4 over time on the gap's departures Log(G_t G_int,t⁻¹)
+   (:func:`smooth_departures`): 2-14 % lower ATE on every sequence measured.
 
 Both sides matter: against a alone the camera centre of a frame a few frames
 away is poorly conditioned (rotation and translation trade off), 2 cm median
@@ -86,7 +88,7 @@ from droidw_cli.config import FillerConfig
 from droidw_cli.slam.evidence import evidence_maps
 from droidw_cli.slam.filler_flow import AheadTargets, grey
 from droidw_cli.slam.optimizer import window_state
-from droidw_cli.slam.poses import compose, interpolate, invert
+from droidw_cli.slam.poses import compose, interpolate, invert, log_departure, retract
 
 IDENTITY = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
 
@@ -400,7 +402,7 @@ class TrajectoryFiller:
             baseline = (centres[1] - centres[0]).norm()
             departure = (invert(state.poses[na:])[:, :3] - invert(init)[:, :3]).norm(dim=1)
             share = torch.where(departure <= self.cfg.max_departure * baseline, share, torch.zeros_like(share))
-        return interpolate(init, state.poses[na:], share)
+        return smooth_departures(init, interpolate(init, state.poses[na:], share), self.cfg.smooth, closed=na == 2)
 
     def _refined_share(self, final: Tensor, start: Tensor) -> Tensor:
         """(m,) λ ∈ [0, 1] of the refined pose in the geodesic blend with the interpolation (model selection):
@@ -410,3 +412,22 @@ class TrajectoryFiller:
         if hi <= lo:
             return (ratio < lo).to(final.dtype)
         return ((hi - ratio) / (hi - lo)).clamp(0.0, 1.0)
+
+
+def smooth_departures(init: Tensor, poses: Tensor, passes: int, closed: bool) -> Tensor:
+    """A gap's poses (m, 7), in time order, with their departures from its interpolation ``init`` smoothed over time.
+
+    δ_t = Log(G_t G_int,t⁻¹); each pass replaces δ_t by (δ_{t−1} + 2 δ_t + δ_{t+1}) / 4, with δ = 0 at the
+    gap's keyframes (both ends when ``closed``, else the last frame repeated), and G_t = Exp(δ_t) G_int,t.
+    The refined departures err smoothly within a gap more than from frame to frame, so one pass gains a
+    little everywhere measured (README, "What the filler adds to the error").
+    """
+    if passes <= 0 or len(poses) < 2:
+        return poses
+    delta = log_departure(poses, init)
+    zero = torch.zeros_like(delta[:1])
+    for _ in range(passes):
+        left = torch.cat([zero, delta[:-1]])
+        right = torch.cat([delta[1:], zero if closed else delta[-1:]])
+        delta = 0.25 * left + 0.5 * delta + 0.25 * right
+    return retract(delta, init)

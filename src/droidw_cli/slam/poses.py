@@ -48,3 +48,13 @@ def interpolate(a: Tensor, b: Tensor, alpha: Tensor) -> Tensor:
     """
     rel = (pp.SE3(b) @ pp.SE3(a).Inv()).Log().tensor()
     return (pp.se3(alpha[:, None] * rel).Exp() @ pp.SE3(a)).tensor()
+
+
+def log_departure(poses: Tensor, reference: Tensor) -> Tensor:
+    """Twists Log(G G_ref⁻¹) (…, 6), ξ = [v, ω], of (…, 7) poses from their references."""
+    return (pp.SE3(poses) @ pp.SE3(reference).Inv()).Log().tensor()
+
+
+def retract(xi: Tensor, reference: Tensor) -> Tensor:
+    """Exp(ξ) G_ref for twists (…, 6) and (…, 7) poses: the inverse of :func:`log_departure`."""
+    return (pp.se3(xi).Exp() @ pp.SE3(reference)).tensor()
