@@ -37,8 +37,7 @@ def to_matrix(poses: Tensor) -> np.ndarray:
 
 def extrapolate(prev: Tensor, last: Tensor, damping: float) -> Tensor:
     """Damped constant velocity: G_new = Exp(damping · Log(G_last G_prev⁻¹)) G_last."""
-    rel = (pp.SE3(last) @ pp.SE3(prev).Inv()).Log()
-    return (pp.se3(damping * rel.tensor()).Exp() @ pp.SE3(last)).tensor()
+    return retract(damping * log_departure(last, prev), last)
 
 
 def interpolate(a: Tensor, b: Tensor, alpha: Tensor) -> Tensor:
@@ -46,8 +45,7 @@ def interpolate(a: Tensor, b: Tensor, alpha: Tensor) -> Tensor:
 
     ``a``, ``b`` (N, 7) and ``alpha`` (N,) in [0, 1].
     """
-    rel = (pp.SE3(b) @ pp.SE3(a).Inv()).Log().tensor()
-    return (pp.se3(alpha[:, None] * rel).Exp() @ pp.SE3(a)).tensor()
+    return retract(alpha[:, None] * log_departure(b, a), a)
 
 
 def log_departure(poses: Tensor, reference: Tensor) -> Tensor:
