@@ -14,6 +14,7 @@ from droidw_cli.geometry.lie import (
     pose_matrix,
     quat_to_matrix,
     se3_exp,
+    se3_log,
 )
 
 
@@ -64,3 +65,30 @@ def test_pose_distance_zero_and_positive():
     b = pose_compose(se3_exp(torch.tensor([[0.1, 0, 0, 0, 0, 0.2]], dtype=torch.float64)).expand(16, 7), a)
     dt, dr = pose_distance(b, a)
     assert torch.allclose(dr, torch.full_like(dr, 0.2), atol=1e-9)
+
+
+def _within_pi(xi):
+    """Twists whose rotation angle is below π (where Log inverts Exp), some near 0 and near π."""
+    xi = xi.clone()
+    norm = xi[:, 3:].norm(dim=-1, keepdim=True).clamp(min=1e-30)
+    xi[:, 3:] = torch.where(norm > 3.0, xi[:, 3:] / norm * 3.0, xi[:, 3:])
+    xi[2, 3:] = torch.tensor([0.0, 0.0, 3.14])  # near π
+    xi[3, 3:] = torch.tensor([3e-3, -2e-3, 1e-3])  # small: series branch of V⁻¹
+    return xi
+
+
+def test_se3_log_inverts_exp_and_matches_pypose():
+    xi = _within_pi(_twists(seed=6))
+    assert torch.allclose(se3_log(se3_exp(xi)), xi, atol=1e-9)
+    poses = se3_exp(xi)
+    assert torch.allclose(se3_log(poses), pp.SE3(poses).Log().tensor(), atol=1e-9)
+    # −q is the same rotation: the same twist
+    flipped = torch.cat((poses[:, :3], -poses[:, 3:]), dim=-1)
+    assert torch.allclose(se3_log(flipped), xi, atol=1e-9)
+
+
+def test_se3_log_float32_close_to_float64():
+    xi = _within_pi(_twists(seed=7, scale=0.5))
+    ours = se3_log(se3_exp(xi).float())
+    assert ours.dtype == torch.float32
+    assert torch.allclose(ours.double(), xi, atol=2e-5)

@@ -125,6 +125,40 @@ def se3_exp(xi: Tensor) -> Tensor:
     return torch.cat((t, so3_exp_quat(w)), dim=-1)
 
 
+def so3_log_quat(q: Tensor) -> Tensor:
+    """Rotation vector ω (..., 3) of unit quaternions (..., 4), xyzw, with θ = ‖ω‖ ≤ π.
+
+    q and −q are the same rotation: with w ≥ 0, θ = 2 atan2(‖q_v‖, w) and
+    ω = θ/‖q_v‖ · q_v (→ 2 q_v / w as ‖q_v‖ → 0).
+    """
+    sign = torch.where(q[..., 3:] < 0, -torch.ones_like(q[..., 3:]), torch.ones_like(q[..., 3:]))
+    qv, w = sign * q[..., :3], sign * q[..., 3:]
+    n = qv.norm(dim=-1, keepdim=True)
+    tiny = n < 1e-12
+    safe = torch.where(tiny, torch.ones_like(n), n)
+    factor = torch.where(tiny, 2.0 / w, 2.0 * torch.atan2(safe, w) / safe)
+    return factor * qv
+
+
+def se3_log(T: Tensor) -> Tensor:
+    """Log of poses (..., 7) as twists ξ = [v, ω] (..., 6), the inverse of :func:`se3_exp`; equals pypose's SE3 Log.
+
+    ω from the quaternion (:func:`so3_log_quat`), v = V(ω)⁻¹ t with
+
+        V⁻¹ = I − ½ [ω]× + c [ω]×²,   c = (1 − (θ/2) cot(θ/2)) / θ²   (→ 1/12 + θ²/720 at θ → 0).
+    """
+    w = so3_log_quat(T[..., 3:])
+    theta2 = (w * w).sum(-1, keepdim=True)
+    small = theta2 < 1e-4
+    half = 0.5 * torch.where(small, torch.ones_like(theta2), theta2).sqrt()
+    c = torch.where(small, 1.0 / 12.0 + theta2 / 720.0,
+                    (1.0 - half * torch.cos(half) / torch.sin(half)) / torch.where(small, torch.ones_like(theta2), theta2))
+    t = T[..., :3]
+    wxt = torch.cross(w, t, dim=-1)
+    v = t - 0.5 * wxt + c * torch.cross(w, wxt, dim=-1)
+    return torch.cat((v, w), dim=-1)
+
+
 def adjoint_matrix(R: Tensor, t: Tensor) -> Tensor:
     """Ad(T) (..., 6, 6) in the [v, ω] ordering from R (..., 3, 3) and t (..., 3)."""
     top = torch.cat((R, skew(t) @ R), dim=-1)
