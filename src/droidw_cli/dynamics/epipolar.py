@@ -13,7 +13,7 @@ Per edge (i, j), on the block centres of the 1/8 grid (x_i, x_j = x_i + flow):
 
 * F by least median of squares (OpenCV, deterministic) on the pixels whose
   correspondence confidence is at least ``min_weight`` (every n-th of them, at
-  most ``FIT_POINTS``);
+  most ``FIT_POINTS`` and ``FIT_SHARE`` of the grid);
 * the Sampson distance of every block centre, in working-resolution pixels:
 
       d² = (x_jᵀ F x_i)² / ((F x_i)₁² + (F x_i)₂² + (Fᵀ x_j)₁² + (Fᵀ x_j)₂²)
@@ -39,8 +39,10 @@ from droidw_cli.geometry.camera import BA_SCALE
 
 #: fewest confident block centres needed to fit F
 MIN_POINTS = 16
-#: F is fitted on at most about this many of them (every n-th; 23 ms for 3072 at 384×512, 7 ms for 768)
+#: F is fitted on at most about this many of them (every n-th; 23 ms for 3072 at 384×512, 7 ms for 768) ...
 FIT_POINTS = 768
+#: ... and at most this share of the grid's block centres: 384 at ``fast``'s 256×384 (32 × 48 grid)
+FIT_SHARE = 0.25
 #: the threshold of an edge is at least this many times its median Sampson distance
 NOISE_FACTOR = 5.0
 #: a keyframe whose mask would cover more than this share of the view is not masked
@@ -88,7 +90,8 @@ def epipolar_distance(flow: np.ndarray, weight: np.ndarray, min_weight: float = 
     if sel.sum() < MIN_POINTS:
         return None
     idx = np.flatnonzero(sel)
-    idx = idx[:: -(-len(idx) // FIT_POINTS)]  # a regular subsample: LMedS time grows with the points
+    fit_points = max(MIN_POINTS, min(FIT_POINTS, int(FIT_SHARE * h * w)))
+    idx = idx[:: -(-len(idx) // fit_points)]  # a regular subsample: LMedS time grows with the points
     fundamental, _ = cv2.findFundamentalMat(x_i[idx], x_j[idx], cv2.FM_LMEDS)
     if fundamental is None or fundamental.shape != (3, 3):
         return None
