@@ -258,3 +258,37 @@ def test_smoothing_spreads_a_single_departure_over_its_neighbours():
 def test_filler_smoothing_passes_must_not_be_negative():
     with pytest.raises(ConfigError, match="smooth"):
         load_config("default", ["filler.smooth=-1"])
+
+
+def test_unmeasured_frames_take_the_departures_interpolated_in_time():
+    """filler.stride: frames between measured ones take their departures linearly in time, zero at the keyframes."""
+    from droidw_cli.slam.filler import between_departures
+    from droidw_cli.slam.poses import log_departure, retract
+
+    torch.manual_seed(1)
+    init = pp.randn_SE3(5, sigma=0.3).tensor()
+    ts = torch.tensor([1.0, 2.0, 3.0, 4.0, 5.0], dtype=torch.float64)  # keyframes at t 0 and 6
+    d1 = torch.tensor([0.02, -0.01, 0.03, 0.004, -0.002, 0.003])
+    d3 = torch.tensor([-0.01, 0.02, 0.0, 0.0, 0.001, -0.002])
+    refined = retract(torch.stack([d1, d3]), init[[1, 3]])
+    out = log_departure(between_departures(init, refined, [1, 3], ts, 0.0, 6.0), init)
+    assert torch.allclose(out[0], d1 / 2, atol=1e-6)  # halfway between the keyframe (0) and frame 1
+    assert torch.allclose(out[2], (d1 + d3) / 2, atol=1e-6)
+    assert torch.allclose(out[4], d3 / 2, atol=1e-6)  # t 5 halfway between t 4 (d3) and the keyframe at 6
+    assert torch.allclose(out[[1, 3]], torch.zeros(2, 6), atol=1e-6)  # the measured ones are left to the caller
+    open_gap = log_departure(between_departures(init, refined, [1, 3], ts, 0.0, None), init)
+    assert torch.allclose(open_gap[4], d3, atol=1e-6)  # an open gap holds its last measured departure
+
+
+def test_filler_stride_keeps_only_every_s_th_image(walk):
+    frames, _ = walk
+    fe, _ = _frontend(walk, [A, B])
+    filler = TrajectoryFiller(fe, load_config("default", ["filler.stride=3"]).filler)
+    for k in range(A + 1, B):
+        filler.add_frame(k, k / 30.0, A, frames[k][0])
+    kept = [p.frame_index for p in filler._pending[A] if p.image is not None]
+    assert kept == [A + 3, A + 6, A + 9]
+    poses = filler.finish()
+    assert set(poses) == set(range(A, B + 1))
+    with pytest.raises(ConfigError, match="stride"):
+        load_config("default", ["filler.stride=0"])

@@ -37,8 +37,7 @@ class IOConfig:
     max_frames: int = 0  # 0 = all
     thumbnail_scale: int = 4  # keyframe thumbnails at 1/thumbnail_scale of the working size
     use_depth: bool = False  # RGB-D: sensor depth feeds the depth-prior term (rgbd.yaml)
-    # frames decoded and prepared ahead on a background thread (0: none).  4 left the main thread waiting
-    # 4-5 ms a frame for it (track_bench walk, default and fast config); 12 and 24: none
+    # frames decoded and prepared ahead on a thread (0: none).  4 left the main thread waiting 4-5 ms a frame (track_bench walk, default and fast config); 12 and 24: none
     prefetch: int = 16
 
 
@@ -88,9 +87,8 @@ class MotionFilterConfig:
 
     thresh: float = 3.0  # grid px
     max_gap: int = 9  # force a keyframe every max_gap frames (after initialisation)
-    # grid px: the lower quartile of the flow from the first frame stays under 0.10 on the fixed preset
-    # (its median reaches 0.63 when a walker fills the view) and 0.02 on vtest.avi; the near-still
-    # wobble's reaches 0.9-1.4 after 7-10 frames
+    # grid px: the lower quartile of the flow from the first frame stays under 0.10 on the fixed preset (its median
+    # reaches 0.63 when a walker fills the view) and 0.02 on vtest.avi; the near-still wobble's 0.9-1.4 after 7-10 frames
     init_min_quartile: float = 0.5
 
     def __post_init__(self) -> None:
@@ -237,6 +235,7 @@ class FillerConfig:
     interpolation where ρ ≥ ``blend_gain``, their geodesic blend between (a hard cut at ``min_gain``
     if ``blend_gain`` ≤ ``min_gain``); a refined camera centre that leaves the interpolated one by
     more than ``max_departure`` of the keyframe baseline is not used.  ``smooth``: passes of [1 2 1]/4 over the gap's departures.
+    ``stride``: only every s-th frame of a gap is measured; the others take the departures interpolated in time.
     """
 
     iters: int = 3
@@ -248,10 +247,11 @@ class FillerConfig:
     # share of the baseline (0: any).  Wobble (1-2.5 cm failed refinements): 0.5: 0.36 → 0.33 cm mono, 0.61 → 0.39 RGB-D (SE(3)); the rest within 0.01 cm
     max_departure: float = 0.5
     smooth: int = 1  # passes (0: off); README "What the filler adds to the error"
+    stride: int = 1
 
     def __post_init__(self) -> None:
-        if min(self.min_gain, self.blend_gain, self.max_departure, self.smooth) < 0 or self.robust_sigma <= 0:
-            raise ValueError("filler.min_gain, blend_gain, max_departure and smooth must be >= 0, robust_sigma > 0")
+        if min(self.min_gain, self.blend_gain, self.max_departure, self.smooth) < 0 or self.robust_sigma <= 0 or self.stride < 1:
+            raise ValueError("filler.min_gain, blend_gain, max_departure, smooth must be >= 0, robust_sigma > 0, stride >= 1")
 
 
 #: the dynamic-mask modes of ``dynamics.mode``
