@@ -250,13 +250,18 @@ class Tracker:
                 source.lazy_depth = True  # decode and prepare the depth of keyframes only (_first_pass)
             items = prefetched(scout.frames(_prepared(source, preparer)), cfg.io.prefetch)
             pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="droidw-features")
+            failed = True
             try:
                 self._first_pass(items, fe, scout, filler, gba, frames, bar, grid, hw, pool, preparer)
+                failed = False
             except BaseException:
                 filler.close()  # stops the filler's flow worker
                 raise
             finally:
-                pool.shutdown(wait=True, cancel_futures=True)
+                # after a failure the queued feature jobs are dropped; after a run they are still read
+                # (the keyframes' uncertainty), so they must finish: cancelling them raised CancelledError
+                # whenever the worker lagged behind the last keyframes
+                pool.shutdown(wait=True, cancel_futures=failed)
                 scout.close()  # the prefetch thread may wait for the tracker to take a candidate
                 items.close()  # stops the prefetch thread, also after an error
                 if restore is not None:
