@@ -28,9 +28,10 @@ from droidw_backend_cpu import CpuBackend
 from fake_device import FakeCuda, is_fake
 
 # a 30 × 40 grid, keyframes at half the default spacing (as in test_track_dynamic.py), every stage on
-# (uncertainty, evidence maps, epipolar masks, global BA, filler) with few iterations each
+# (uncertainty, evidence maps, epipolar masks, global BA, filler with its stride) with few iterations each
 OVERRIDES = ["io.target_area=76800", "motion_filter.thresh=1.5", "frontend.keyframe_thresh=1.5",
-             "frontend.init_iters=6", "uncertainty.warmup_iters=2", "backend.iters=3", "filler.iters=2"]
+             "frontend.init_iters=6", "uncertainty.warmup_iters=2", "backend.iters=3", "filler.iters=2",
+             "filler.stride=2"]
 
 
 class SpyBackend(BABackend):

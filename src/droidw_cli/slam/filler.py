@@ -452,17 +452,18 @@ def between_departures(init: Tensor, refined: Tensor, measured: list[int], ts: T
     take their departure Log(G G_int⁻¹) interpolated linearly in time between their measured neighbours,
     with zero departure at the gap's keyframes (at t_a, and at t_b when the gap is closed; an open gap
     holds its last measured departure).  Returns the gap's poses with the measured ones left as ``init``."""
-    delta = log_departure(refined, init[measured]).double()
+    delta = log_departure(refined, init[measured]).double().cpu()  # the knots live on the host, with ts
     stamps = ts[measured].double()
     zero = torch.zeros(1, 6, dtype=torch.float64)
     knots_t = torch.cat([torch.tensor([t_a], dtype=torch.float64), stamps]
                         + ([torch.tensor([t_b], dtype=torch.float64)] if t_b is not None else []))
     knots_d = torch.cat([zero, delta] + ([zero] if t_b is not None else []))
-    other = [n for n in range(len(init)) if n not in set(measured)]
+    kept = set(measured)
+    other = [n for n in range(len(init)) if n not in kept]
     t = ts[other].double()
     seg = (torch.searchsorted(knots_t, t, right=True) - 1).clamp(0, len(knots_t) - 2)
     t0, t1 = knots_t[seg], knots_t[seg + 1]
     alpha = ((t - t0) / (t1 - t0).clamp_min(1e-12)).clamp(0.0, 1.0)[:, None]
     out = init.clone()
-    out[other] = retract(((1 - alpha) * knots_d[seg] + alpha * knots_d[seg + 1]).to(init.dtype), init[other])
+    out[other] = retract(((1 - alpha) * knots_d[seg] + alpha * knots_d[seg + 1]).to(init), init[other])
     return out
