@@ -150,9 +150,9 @@ def se3_log(T: Tensor) -> Tensor:
     w = so3_log_quat(T[..., 3:])
     theta2 = (w * w).sum(-1, keepdim=True)
     small = theta2 < 1e-4
-    half = 0.5 * torch.where(small, torch.ones_like(theta2), theta2).sqrt()
-    c = torch.where(small, 1.0 / 12.0 + theta2 / 720.0,
-                    (1.0 - half * torch.cos(half) / torch.sin(half)) / torch.where(small, torch.ones_like(theta2), theta2))
+    safe2 = torch.where(small, torch.ones_like(theta2), theta2)
+    half = 0.5 * safe2.sqrt()
+    c = torch.where(small, 1.0 / 12.0 + theta2 / 720.0, (1.0 - half * torch.cos(half) / torch.sin(half)) / safe2)
     t = T[..., :3]
     wxt = torch.cross(w, t, dim=-1)
     v = t - 0.5 * wxt + c * torch.cross(w, wxt, dim=-1)

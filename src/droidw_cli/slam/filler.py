@@ -347,10 +347,8 @@ class TrajectoryFiller:
         order = sorted(stamps, key=stamps.get)
         knot_t = torch.tensor([stamps[f] for f in order], dtype=torch.float64)
         knot_pose = torch.stack([poses[f] for f in order])
-        seg = (torch.searchsorted(knot_t, ts, right=True) - 1).clamp(0, len(order) - 2)
-        t0, t1 = knot_t[seg], knot_t[seg + 1]
-        alpha = ((ts - t0) / (t1 - t0).clamp_min(1e-9)).clamp(0, 1).float().to(buf.device)
-        return interpolate(knot_pose[seg], knot_pose[seg + 1], alpha)
+        seg, alpha = knot_segments(knot_t, ts)
+        return interpolate(knot_pose[seg], knot_pose[seg + 1], alpha.float().to(buf.device))
 
     def anchor_weight(self, k: int) -> Tensor:
         """(h, w) per-pixel weight of keyframe k as an anchor: BA confidence × uncertainty factor."""
@@ -460,10 +458,16 @@ def between_departures(init: Tensor, refined: Tensor, measured: list[int], ts: T
     knots_d = torch.cat([zero, delta] + ([zero] if t_b is not None else []))
     kept = set(measured)
     other = [n for n in range(len(init)) if n not in kept]
-    t = ts[other].double()
-    seg = (torch.searchsorted(knots_t, t, right=True) - 1).clamp(0, len(knots_t) - 2)
-    t0, t1 = knots_t[seg], knots_t[seg + 1]
-    alpha = ((t - t0) / (t1 - t0).clamp_min(1e-12)).clamp(0.0, 1.0)[:, None]
+    seg, alpha = knot_segments(knots_t, ts[other].double())
+    alpha = alpha[:, None]
     out = init.clone()
     out[other] = retract(((1 - alpha) * knots_d[seg] + alpha * knots_d[seg + 1]).to(init), init[other])
     return out
+
+
+def knot_segments(knot_t: Tensor, ts: Tensor) -> tuple[Tensor, Tensor]:
+    """For times ``ts``, the segment s of the sorted knot times (knot_t[s] ≤ t < knot_t[s + 1], clamped to
+    the first and last) and the position α = (t − t_s) / (t_{s+1} − t_s) in it, clamped to [0, 1]."""
+    seg = (torch.searchsorted(knot_t, ts, right=True) - 1).clamp(0, len(knot_t) - 2)
+    t0, t1 = knot_t[seg], knot_t[seg + 1]
+    return seg, ((ts - t0) / (t1 - t0).clamp_min(1e-9)).clamp(0.0, 1.0)
