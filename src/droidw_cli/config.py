@@ -123,20 +123,16 @@ class FeaturesConfig:
 class FrontendConfig:
     """Initialisation and the sliding-window local BA (DROID-SLAM defaults; flows in grid px).
 
-    Initialisation starts as soon as ``warmup_min`` keyframes show ``init_parallax``
-    grid px of parallax (the residual of keyframe 0 → newest flow after the best
-    homography, which absorbs any rotation), or at ``warmup`` keyframes whatever
-    the parallax (DROID's fixed count).  ``keyframe_thresh``: after the first
-    ``iters1`` iterations, the second-newest keyframe is removed when its frame
-    distance to the one before is below this (the camera slowed down or
-    stopped), unless that would leave more than ``removal_max_span`` frames
-    between keyframes (the filler's motion-only BA loses accuracy over long
-    gaps of slow but steady motion).  ``flow_thresh`` and ``nms``: proximity edges of the newest
-    keyframes; ``proximity_max`` bounds how many new pairs one keyframe brings.
-    ``max_age``: an edge leaves the window BA after this many BA iterations.
-    ``robust_sigma`` > 0: every window BA step weights each correspondence by the
-    Cauchy factor 1 / (1 + r²/σ²) of its current residual r (grid px), see
-    :func:`droidw_cli.slam.optimizer.robust_edges`.
+    Initialisation starts as soon as ``warmup_min`` keyframes show ``init_parallax`` grid px of parallax (the
+    residual of keyframe 0 → newest flow after the best homography, which absorbs any rotation), or at
+    ``warmup`` keyframes whatever the parallax (DROID's fixed count).  ``keyframe_thresh``: after the first
+    ``iters1`` iterations, the second-newest keyframe is removed when its frame distance to the one before is
+    below this (the camera slowed down or stopped), unless that would leave more than ``removal_max_span``
+    frames between keyframes (the filler's motion-only BA loses accuracy over long gaps of slow but steady
+    motion).  ``flow_thresh`` and ``nms``: proximity edges of the newest keyframes; ``proximity_max`` bounds how
+    many new pairs one keyframe brings.  ``max_age``: an edge leaves the window BA after this many BA
+    iterations.  ``robust_sigma`` > 0: every window BA step weights each correspondence by the Cauchy factor 1 /
+    (1 + r²/σ²) of its current residual r (grid px), see :func:`droidw_cli.slam.optimizer.robust_edges`.
     """
 
     warmup: int = 12
@@ -163,6 +159,7 @@ class FrontendConfig:
     iters2: int = 2
     velocity_damping: float = 0.5
     proximity_stride: int = 2  # the proximity candidates' frame distance averages every s-th grid pixel (s² cheaper)
+    skip_doomed: bool = False  # pass over a candidate that removal would drop at once (Frontend.doomed): fast rotation
     match_ahead: bool = True  # match a new keyframe's pair (k, k − 1) on the prefetch thread, beside k − 1's BA (slam/scout.py)
     robust_sigma: float = 1.0  # grid px: Cauchy reweighting of the window BA's residuals (0 = off); rotate 2.82 → 1.07 cm with backend.robust_sigma 0.5
 

@@ -68,7 +68,7 @@ from droidw_cli.slam.focal import clamp_focal, focal_observable
 from droidw_cli.slam.keyframes import KeyframeBuffer
 from droidw_cli.slam.optimizer import SharedState, run_window, window_state
 from droidw_cli.slam.parallax import homography_parallax
-from droidw_cli.slam.poses import extrapolate
+from droidw_cli.slam.poses import extrapolate, log_departure, retract
 
 #: proximity edges are sought for the keyframes this close to the newest (DROID: t1 − 5)
 PROXIMITY_RECENT = 5
@@ -285,6 +285,38 @@ class Frontend:
                               self.fcfg.beta, self.params.min_depth, stride=stride)
 
     # ------------------------------------------------------------------ public
+    def doomed(self, frame_index: int, full: float) -> bool:
+        """Would keyframe removal drop candidate ``frame_index`` again at once?  (``frontend.skip_doomed``)
+
+        Removal drops the second-newest keyframe when d(k − 2, k − 1) < ``keyframe_thresh``
+        (:meth:`_update`); under fast rotation it dropped about every other candidate after paying
+        for its flow and BA (rotate: 168 keyframes added, 82 removed).  This predicts that distance
+        before any of it: the full-motion part is ``full``, the motion filter's mean flow (grid px)
+        from the newest keyframe summed over the candidates since; the translation-only part is
+        that of the newest keyframe's disparity under the pose extrapolated at constant velocity in
+        frame time,
+
+            G_c = Exp(α Log(G_{k−1} G_{k−2}⁻¹)) G_{k−1},   α = (c − f_{k−1}) / (f_{k−1} − f_{k−2}),
+            d̂ = β · full + (1 − β) · d_trans(k − 1, c)   (one way).
+
+        Doomed when d̂ < ``keyframe_thresh`` and the gap so far is at most half of
+        ``removal_max_span`` (the next candidate is expected as far on).  Only once initialised.
+        """
+        f, buf = self.fcfg, self.buffer
+        k = len(buf)
+        if not (f.skip_doomed and self.initialised and k >= 2):
+            return False
+        f1, f0 = buf.frame_index[k - 1], buf.frame_index[k - 2]
+        if 2 * (frame_index - f1) > f.removal_max_span:
+            return False
+        alpha = (frame_index - f1) / max(1, f1 - f0)
+        pose = retract(alpha * log_departure(buf.poses[k - 1], buf.poses[k - 2]), buf.poses[k - 1])
+        idx = torch.zeros(1, dtype=torch.long, device=buf.device)
+        trans = frame_distance(torch.stack([buf.poses[k - 1], pose]), buf.disps[k - 1:k].expand(2, -1, -1),
+                               self.shared.intrinsics, idx, idx + 1, 0.0, self.params.min_depth,
+                               bidirectional=False, stride=f.proximity_stride)
+        return f.beta * full + (1.0 - f.beta) * float(trans[0]) < f.keyframe_thresh
+
     def add_keyframe(self, frame_index: int, timestamp: float, image: np.ndarray, thumbnail: np.ndarray,
                      features: torch.Tensor | None, depth_prior: torch.Tensor | None) -> int:
         """Insert a keyframe and run initialisation or the window update; returns its index."""

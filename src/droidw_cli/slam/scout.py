@@ -8,7 +8,8 @@ also matches c with the previous candidate p, both directions from one
 forward-backward DIS pair, without an initial flow.  That is exactly the
 frontend's edge pair (k, k − 1) once c becomes keyframe k: keyframe removal
 only ever drops the second-newest keyframe, so the newest is always the last
-candidate.  The pair is then computed on the second core while the main
+candidate (with ``frontend.skip_doomed`` the tracker may pass a candidate over;
+the next one's early match then goes unused and the frontend matches it itself).  The pair is then computed on the second core while the main
 thread runs the previous keyframe's window BA (on one torch thread), instead
 of after it.  The result is the same as on the main thread: DIS without an
 initial flow depends on its two images only (:mod:`droidw_cli.correspondence.dis`).
@@ -58,6 +59,7 @@ class Scout:
         self._prematch = prematch
         self._prefeatures = prefeatures
         self._initialised = False
+        self._flows: dict[int, float] = {}  # candidate frame → its mean flow from the previous candidate (grid px)
         self._turn = threading.Event()  # set: the tracker has taken the last candidate
         self._turn.set()
         self._closed = False
@@ -76,11 +78,12 @@ class Scout:
         for frame, image, depth in items:
             initialised = self._initialised
             with self._timer("motion_filter"):
-                candidate, _ = self.mfilter.check(image, initialised)
+                candidate, stats = self.mfilter.check(image, initialised)
             if not candidate:
                 yield frame, image, depth, False
                 continue
             self.mfilter.accept(image)
+            self._flows[frame.index] = stats.mean
             if initialised:
                 self._queue(frame.index, image, previous)
                 previous = (frame.index, image)
@@ -104,6 +107,10 @@ class Scout:
             self._pending.update(jobs)
             if self._released:
                 self._start()
+
+    def flow(self, frame: int) -> float:
+        """Candidate ``frame``'s mean flow from the previous candidate in grid px (once; 0 for the first)."""
+        return self._flows.pop(frame, 0.0)
 
     def taken(self, initialised: bool) -> None:
         """The tracker has added the last candidate; ``initialised``: the frontend's state after it."""

@@ -162,6 +162,7 @@ class Tracker:
                     pool: ThreadPoolExecutor, preparer: FramePreparer) -> None:
         """Keyframes (the candidates the scout flagged) into the frontend; every other frame goes to the filler."""
         cfg, timer, s = self.cfg, self.timer, self.cfg.io.thumbnail_scale
+        since = 0.0  # the motion filter's flow from the newest keyframe, summed over the candidates since
         while True:
             with timer("decode"):  # the wait for the prefetch thread
                 item = next(items, None)
@@ -169,6 +170,11 @@ class Tracker:
                 return
             frame, image, depth, is_kf = item  # the motion filter ran on the prefetch thread (slam/scout.py)
             frames.append((frame.index, frame.timestamp))
+            if is_kf:  # a candidate that keyframe removal would drop at once stays an ordinary frame
+                since += scout.flow(frame.index)
+                is_kf = not fe.doomed(frame.index, since)
+                if is_kf:
+                    since = 0.0
             if is_kf:
                 # the features run on a worker while the frontend matches the new edges; the
                 # "features" stage is the time the BA then waits for them
