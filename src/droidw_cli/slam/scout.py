@@ -8,10 +8,11 @@ also matches c with the previous candidate p, both directions from one
 forward-backward DIS pair, without an initial flow.  That is exactly the
 frontend's edge pair (k, k − 1) once c becomes keyframe k: keyframe removal
 only ever drops the second-newest keyframe, so the newest is always the last
-candidate (with ``frontend.skip_doomed`` the tracker may pass a candidate over;
-the next one's early match then goes unused and the frontend matches it itself).  The pair is then computed on the second core while the main
-thread runs the previous keyframe's window BA (on one torch thread), instead
-of after it.  The result is the same as on the main thread: DIS without an
+candidate (with ``frontend.skip_doomed`` the tracker may pass a candidate
+over; the next one's early match then goes unused and the frontend matches it
+itself).  The pair is then computed on the second core while the main thread
+runs the previous keyframe's window BA (on one torch thread), instead of after
+it.  The result is the same as on the main thread: DIS without an
 initial flow depends on its two images only (:mod:`droidw_cli.correspondence.dis`).
 The candidate's features (the uncertainty's input) are extracted there too,
 before the match.
