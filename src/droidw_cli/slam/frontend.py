@@ -62,13 +62,13 @@ from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_m
 from droidw_cli.dynamics.inloop import KeyframeMasks, observed_disparity
 from droidw_cli.slam import graph
 from droidw_cli.slam.depth_prior import seed_disparity
-from droidw_cli.slam.distance import frame_distance, transfer_disparity
+from droidw_cli.slam.distance import candidate_distance, frame_distance, transfer_disparity
 from droidw_cli.slam.evidence import EVIDENCE_CHANNELS, evidence_maps
 from droidw_cli.slam.focal import clamp_focal, focal_observable
 from droidw_cli.slam.keyframes import KeyframeBuffer
 from droidw_cli.slam.optimizer import SharedState, run_window, window_state
 from droidw_cli.slam.parallax import homography_parallax
-from droidw_cli.slam.poses import extrapolate, log_departure, retract
+from droidw_cli.slam.poses import extrapolate
 
 #: proximity edges are sought for the keyframes this close to the newest (DROID: t1 − 5)
 PROXIMITY_RECENT = 5
@@ -286,22 +286,10 @@ class Frontend:
 
     # ------------------------------------------------------------------ public
     def doomed(self, frame_index: int, full: float) -> bool:
-        """Would keyframe removal drop candidate ``frame_index`` again at once?  (``frontend.skip_doomed``)
-
-        Removal drops the second-newest keyframe when d(k − 2, k − 1) < ``keyframe_thresh``
-        (:meth:`_update`); under fast rotation it dropped about every other candidate after paying
-        for its flow and BA (rotate: 168 keyframes added, 82 removed).  This predicts that distance
-        before any of it: the full-motion part is ``full``, the motion filter's mean flow (grid px)
-        from the newest keyframe summed over the candidates since; the translation-only part is
-        that of the newest keyframe's disparity under the pose extrapolated at constant velocity in
-        frame time,
-
-            G_c = Exp(α Log(G_{k−1} G_{k−2}⁻¹)) G_{k−1},   α = (c − f_{k−1}) / (f_{k−1} − f_{k−2}),
-            d̂ = β · full + (1 − β) · d_trans(k − 1, c)   (one way).
-
-        Doomed when d̂ < ``keyframe_thresh`` and the gap so far is at most half of
-        ``removal_max_span`` (the next candidate is expected as far on).  Only once initialised.
-        """
+        """Would keyframe removal drop candidate ``frame_index`` at once (``frontend.skip_doomed``)?  Yes when
+        its predicted distance to the newest keyframe (:func:`~droidw_cli.slam.distance.candidate_distance`;
+        ``full``: the motion filter's flow since that keyframe) is under ``keyframe_thresh`` and the gap so far
+        is at most half of ``removal_max_span`` (the next candidate is expected as far on)."""
         f, buf = self.fcfg, self.buffer
         k = len(buf)
         if not (f.skip_doomed and self.initialised and k >= 2):
@@ -309,13 +297,10 @@ class Frontend:
         f1, f0 = buf.frame_index[k - 1], buf.frame_index[k - 2]
         if 2 * (frame_index - f1) > f.removal_max_span:
             return False
-        alpha = (frame_index - f1) / max(1, f1 - f0)
-        pose = retract(alpha * log_departure(buf.poses[k - 1], buf.poses[k - 2]), buf.poses[k - 1])
-        idx = torch.zeros(1, dtype=torch.long, device=buf.device)
-        trans = frame_distance(torch.stack([buf.poses[k - 1], pose]), buf.disps[k - 1:k].expand(2, -1, -1),
-                               self.shared.intrinsics, idx, idx + 1, 0.0, self.params.min_depth,
-                               bidirectional=False, stride=f.proximity_stride)
-        return f.beta * full + (1.0 - f.beta) * float(trans[0]) < f.keyframe_thresh
+        d = candidate_distance(buf.poses[k - 2], buf.poses[k - 1], buf.disps[k - 1], self.shared.intrinsics,
+                               (frame_index - f1) / max(1, f1 - f0), full, f.beta, self.params.min_depth,
+                               f.proximity_stride)
+        return d < f.keyframe_thresh
 
     def add_keyframe(self, frame_index: int, timestamp: float, image: np.ndarray, thumbnail: np.ndarray,
                      features: torch.Tensor | None, depth_prior: torch.Tensor | None) -> int:
