@@ -25,3 +25,35 @@ def test_freed_holes_are_returned():
     assert release_free_memory()
     assert before - _rss_mb() > 60  # about 125 MB of holes
     del blocks
+
+
+
+def _anonymous_bytes() -> int:
+    """Bytes of the process's anonymous mappings other than the brk heap (mmapped blocks land here)."""
+    total = 0
+    with open("/proc/self/maps") as f:
+        for line in f:
+            parts = line.split()
+            if len(parts) == 5:  # no path: anonymous ([heap] and [stack] have one)
+                lo, hi = (int(v, 16) for v in parts[0].split("-"))
+                total += hi - lo
+    return total
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux") or not ctypes.util.find_library("c"),
+                    reason="glibc's mallopt")
+def test_large_blocks_are_mapped_only_inside_the_block():
+    """Inside, a 12 MB block gets a mapping of its own; after it, the heap takes such a block (threshold 32 MB)."""
+    from droidw_cli.slam.heap import large_blocks_mapped
+
+    size = 12 * 2**20
+    with large_blocks_mapped(8 * 2**20) as applied:
+        assert applied
+        before = _anonymous_bytes()
+        inside = bytearray(size)
+        assert _anonymous_bytes() - before >= size
+        del inside
+    before = _anonymous_bytes()
+    after = bytearray(size)
+    assert _anonymous_bytes() - before < size
+    del after

@@ -19,7 +19,8 @@ iterations), and once at the end (``iters``).
 
 The images of the keyframes in the problem are kept JPEG-encoded at the
 working resolution (``image_quality``), about a tenth of their raw size, and
-each run first hands the heap's free pages back (:mod:`droidw_cli.slam.heap`).
+each run first hands the heap's free pages back and maps its large temporaries
+on their own (:mod:`droidw_cli.slam.heap`).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from droidw_cli.io.jpeg import decode_rgb, encode_rgb
 from droidw_cli.slam import graph
 from droidw_cli.slam.distance import frame_distance
 from droidw_cli.slam.frontend import Frontend
-from droidw_cli.slam.heap import release_free_memory
+from droidw_cli.slam.heap import large_blocks_mapped, release_free_memory
 from droidw_cli.slam.optimizer import run_window
 
 #: the candidates' frame distance is averaged over every DISTANCE_STRIDE-th grid pixel
@@ -118,6 +119,10 @@ class GlobalBackend:
 
     def run(self, iters: int) -> float:
         """One bounded global BA over [lo, n) with new proximity edges; returns the final cost."""
+        with large_blocks_mapped():
+            return self._run(iters)
+
+    def _run(self, iters: int) -> float:
         fe = self.fe
         n = len(fe.buffer)
         self.last_run = n
