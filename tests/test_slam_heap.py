@@ -1,4 +1,4 @@
-"""The heap's free pages go back to the OS before each global BA (slam/heap.py)."""
+"""The heap's free pages go back to the OS before each global BA, and its large blocks are mapped (slam/heap.py)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,10 @@ import sys
 
 import pytest
 
-from droidw_cli.slam.heap import release_free_memory
+from droidw_cli.slam.heap import large_blocks_mapped, release_free_memory
+
+glibc = pytest.mark.skipif(not sys.platform.startswith("linux") or not ctypes.util.find_library("c"),
+                           reason="glibc's malloc_trim and mallopt")
 
 
 def _rss_mb() -> float:
@@ -15,8 +18,7 @@ def _rss_mb() -> float:
         return int(f.read().split()[1]) * 4096 / 2**20
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux") or not ctypes.util.find_library("c"),
-                    reason="glibc's malloc_trim")
+@glibc
 def test_freed_holes_are_returned():
     """Blocks under the mmap threshold, every other one freed: holes that only a trim gives back."""
     blocks = [bytearray(64 * 1024) for _ in range(4000)]  # 250 MB, touched
@@ -25,7 +27,6 @@ def test_freed_holes_are_returned():
     assert release_free_memory()
     assert before - _rss_mb() > 60  # about 125 MB of holes
     del blocks
-
 
 
 def _anonymous_bytes() -> int:
@@ -40,12 +41,9 @@ def _anonymous_bytes() -> int:
     return total
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux") or not ctypes.util.find_library("c"),
-                    reason="glibc's mallopt")
+@glibc
 def test_large_blocks_are_mapped_only_inside_the_block():
     """Inside, a 12 MB block gets a mapping of its own; after it, the heap takes such a block (threshold 32 MB)."""
-    from droidw_cli.slam.heap import large_blocks_mapped
-
     size = 12 * 2**20
     with large_blocks_mapped(8 * 2**20) as applied:
         assert applied
