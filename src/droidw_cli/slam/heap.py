@@ -12,9 +12,10 @@ starts from what is live.
 
 Inside a run, :func:`large_blocks_mapped` lowers glibc's mmap threshold
 (``M_MMAP_THRESHOLD``) to 16 MB: the run's per-edge (E, HW) temporaries (22 MB
-at 1800 edges on the 48 × 64 grid), whose size follows the edge count, get
-their own mappings and go back to the system when freed instead of leaving
-holes in the heap.  Smaller blocks stay on the heap: a 1 MB threshold made the
+at 1800 edges on the 48 × 64 grid), whose size follows the edge count, no
+longer extend the heap where no free chunk holds them (glibc consults the
+threshold only then) but get mappings of their own, which go back to the
+system when freed instead of leaving holes.  Smaller blocks stay on the heap: a 1 MB threshold made the
 global BA 30-60 % slower (page faults on every temporary), 16 MB costs nothing
 measurable.  After the run the threshold returns to 32 MB, the ceiling of
 glibc's own dynamic threshold.  Elsewhere (musl, macOS, Windows) both do nothing.
