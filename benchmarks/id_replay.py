@@ -1,0 +1,168 @@
+"""Object-id replay: the object tracker's parameters against id switches, without running SLAM again.
+
+    python benchmarks/id_replay.py --capture [--presets walk wobble stopgo rotate] [--seeds 1 2] [--inputs rgbd mono]
+    python benchmarks/id_replay.py [--set depth_tol=0.35 --set min_overlap=0.2 ...] [--only rotate-s1-rgbd ...]
+
+Object ids are given once the run is over (``droidw_cli.dynamics.objects.finish``), from the
+keyframe masks, poses and depths of the run.  ``--capture`` tracks each cached preset (450 frames,
+rendered into ``benchmarks/.cache`` as by ``dynamic_bench.py --modes``: RGB-D with the ``rgbd``
+config and ``dynamics.mode`` both, monocular with the default config and epipolar masks), each in
+its own process, and stores the inputs of that call, the keyframe indices and each walker's
+ground-truth mask on the BA grid in ``benchmarks/.cache/ids/``.
+
+Without ``--capture``: for every stored capture, the final masks
+(:func:`~droidw_cli.dynamics.objects.final_pass`) and then the ids
+(:func:`~droidw_cli.dynamics.objects.track_objects`) twice, with the
+:class:`~droidw_cli.dynamics.tracker.DynamicObjectTracker` defaults and with the ``--set``
+overrides of its fields.  Per capture and in total: the worst walker's id switches while in view
+(in brackets over all keyframes where it has an id), the share of walkers in view whose id another
+walker in view has too, and the number of ids, as ``dynamic_bench.py --modes`` counts them.  The
+defaults reproduce the captured run's ids exactly (checked, column "same").
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import pickle
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _bench_common import cached_sequence, print_table, run_case_subprocess, track_source  # noqa: E402
+from dynamic_bench import id_shared, id_switches, id_switches_any, instance_masks  # noqa: E402
+
+STORE = Path(__file__).resolve().parent / ".cache" / "ids"
+INPUTS = {"rgbd": ("rgbd", "both"), "mono": ("default", "epipolar")}
+
+
+def capture_one(args: argparse.Namespace) -> None:
+    """Track one cached preset and store what ``finish`` was given (internal: runs in a subprocess)."""
+    import json
+
+    import droidw_cli.slam.tracker as tracker_module
+    from droidw_cli.config import load_config
+    from droidw_cli.io.frames import open_source
+    from droidw_cli.synth import SynthConfig, build_scene
+
+    config, mode = INPUTS[args.input]
+    cfg = SynthConfig.preset(args.preset, seed=args.seed)
+    source = open_source(cached_sequence(cfg, args.preset))
+    source.strict_depth = args.input == "rgbd"
+    seen = {}
+    finish = tracker_module.finish
+
+    def recording_finish(masks, poses_w2c, disps_obs, intrinsics, dyn_cfg, sensor_depth=False):
+        seen["inputs"] = (masks, poses_w2c.clone(), disps_obs.clone(), intrinsics.clone(), dyn_cfg, sensor_depth)
+        return finish(masks, poses_w2c, disps_obs, intrinsics, dyn_cfg, sensor_depth=sensor_depth)
+
+    tracker_module.finish = recording_finish  # the run calls it by this module's name
+    result, _ = track_source(source, source.intrinsics_hint, [f"dynamics.mode={mode}"], config=config)
+    truth = instance_masks(cfg, build_scene(cfg), result.kf_index, load_config(config, []).io.target_area)
+    STORE.mkdir(parents=True, exist_ok=True)
+    path = STORE / f"{args.preset}-s{args.seed}-{args.input}.pkl"
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "wb") as f:
+        pickle.dump({"inputs": seen["inputs"], "ids": result.kf_object_ids, "truth": truth}, f)
+    tmp.replace(path)
+    print(json.dumps({"path": str(path), "keyframes": int(len(result.kf_index))}))
+
+
+def replay(capture: dict, overrides: dict[str, object]) -> tuple[int, int, float, int, np.ndarray]:
+    """Ids of a capture with the tracker's fields overridden: (switches, switches_any, shared, ids, id maps)."""
+    import droidw_cli.dynamics.objects as objects
+
+    masks, poses, disps, intrinsics, cfg, sensor_depth = capture["inputs"]
+    if "final" not in capture:
+        capture["final"] = objects.final_pass(masks, poses, disps, intrinsics, cfg, sensor_depth)
+    default_tracker = objects.DynamicObjectTracker
+
+    def tracker(**kwargs):
+        made = default_tracker(**kwargs)
+        for name, value in overrides.items():
+            setattr(made, name, value)
+        return made
+
+    objects.DynamicObjectTracker = tracker
+    try:
+        rec = objects.track_objects(masks, poses, disps, intrinsics, cfg, [m.clone() for m in capture["final"]],
+                                    sensor_depth)
+    finally:
+        objects.DynamicObjectTracker = default_tracker
+    truth, ids = capture["truth"], rec.ids
+    return (id_switches(truth, ids), id_switches_any(truth, ids), id_shared(truth, ids),
+            int(len(np.unique(ids[ids >= 0]))), ids)
+
+
+def parse_overrides(items: list[str]) -> dict[str, object]:
+    """``field=value`` pairs of :class:`DynamicObjectTracker` fields, converted to the field's type."""
+    from droidw_cli.dynamics.tracker import DynamicObjectTracker
+
+    defaults = DynamicObjectTracker()
+    known = [f.name for f in dataclasses.fields(DynamicObjectTracker)  # the parameters, not the tracking state
+             if not f.name.startswith("_") and f.name != "frame" and isinstance(getattr(defaults, f.name), (int, float))]
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or name not in known:
+            raise SystemExit(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(known)}")
+        out[name] = type(getattr(defaults, name))(value)
+    return out
+
+
+def replay_table(args: argparse.Namespace) -> None:
+    overrides = parse_overrides(args.set)
+    paths = sorted(STORE.glob("*.pkl"))
+    if args.only:
+        paths = [p for p in paths if p.stem in set(args.only)]
+    if not paths:
+        raise SystemExit(f"no captures in {STORE}: run with --capture first")
+    rows, totals = [], np.zeros(4)
+    for path in paths:
+        with open(path, "rb") as f:
+            capture = pickle.load(f)
+        base = replay(capture, {})
+        new = replay(capture, overrides) if overrides else base
+        same = bool(np.array_equal(base[4], capture["ids"]))
+        totals += [base[0], new[0], base[2], new[2]]
+        rows.append([path.stem, f"{base[0]} ({base[1]})", f"{100 * base[2]:.0f}", base[3], "yes" if same else "NO",
+                     f"{new[0]} ({new[1]})", f"{100 * new[2]:.0f}", new[3]])
+        print(" | ".join(str(c) for c in rows[-1]), file=sys.stderr, flush=True)
+    rows.append(["total / mean", f"{totals[0]:.0f}", f"{100 * totals[2] / len(paths):.1f}", "", "",
+                 f"{totals[1]:.0f}", f"{100 * totals[3] / len(paths):.1f}", ""])
+    print(f"\nObject ids replayed, overrides: {overrides or 'none'}")
+    print_table(["capture", "switches (any)", "shared [%]", "ids", "same", "with overrides: switches (any)",
+                 "shared [%]", "ids"], rows)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--capture", action="store_true", help="track the presets and store the captures")
+    ap.add_argument("--presets", nargs="+", default=["walk", "wobble", "stopgo", "rotate"])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--inputs", nargs="+", choices=sorted(INPUTS), default=["rgbd", "mono"])
+    ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                    help="a DynamicObjectTracker field for the replay")
+    ap.add_argument("--only", nargs="+", default=[], metavar="NAME", help="captures to replay, e.g. rotate-s1-rgbd")
+    ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--preset", default="walk", help=argparse.SUPPRESS)
+    ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
+    ap.add_argument("--input", default="rgbd", choices=sorted(INPUTS), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.one:
+        capture_one(args)
+    elif args.capture:
+        for preset in args.presets:
+            for seed in args.seeds:
+                for kind in args.inputs:
+                    r = run_case_subprocess("id_replay.py", ["--preset", preset, "--seed", str(seed),
+                                                             "--input", kind])
+                    print(f"captured {r['path']} ({r['keyframes']} keyframes)", file=sys.stderr, flush=True)
+    else:
+        replay_table(args)
+
+
+if __name__ == "__main__":
+    main()
