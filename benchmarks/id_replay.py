@@ -16,8 +16,9 @@ Without ``--capture``: for every stored capture, the final masks
 :class:`~droidw_cli.dynamics.tracker.DynamicObjectTracker` defaults and with the ``--set``
 overrides of its fields.  Per capture and in total: the worst walker's id switches while in view
 (in brackets over all keyframes where it has an id), the share of walkers in view whose id another
-walker in view has too, and the number of ids, as ``dynamic_bench.py --modes`` counts them.  The
-defaults reproduce the captured run's ids exactly (checked, column "same").
+walker in view has too, and the number of ids, as ``dynamic_bench.py --modes`` counts them.  Column
+"same": the defaults gave the captured run's ids exactly (they do unless the object-id code changed since
+the capture; capture again then).
 """
 
 from __future__ import annotations
