@@ -2,7 +2,7 @@
 """Is the correspondence source's parallax right?  Relative translation from its flow with exact depth.
 
     python benchmarks/flow_bench.py [--presets walk rotate] [--seed 1] [--gaps 4 8] [--pairs 12]
-                                    [--flows gt medium fine fast] [--target-area 196608]
+                                    [--flows gt medium fine fast] [--target-area 196608] [--coarsest-scale 0]
 
 For frame pairs (k, k + gap) of the generator's realistic sequences (rendered
 once into ``benchmarks/.cache``, as in ``track_bench.py``), each flow i → j is
@@ -118,11 +118,11 @@ def _listed(index: Path) -> list[str]:
 
 
 def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], target_area: int,
-            seeded: bool = False) -> list[list]:
+            seeded: bool = False, coarsest_scale: int = 0) -> list[list]:
     """One table row per flow: the translation's scale and the rotation error over ``pairs`` pairs."""
     import cv2
 
-    from droidw_cli.correspondence.dis import create_dis, to_gray
+    from droidw_cli.correspondence.dis import calc_deep, create_dis, to_gray
     from droidw_cli.correspondence.grid import area_downsample, flow_to_target
     from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics
     from droidw_cli.io.prepare import FramePreparer
@@ -144,6 +144,17 @@ def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], targ
     k_grid = scale_intrinsics(k_work, BA_SCALE)
     starts = np.linspace(0, n_frames - gap - 1, pairs).astype(int)
     stats: dict[str, list[tuple[float, float, float, float]]] = {f: [] for f in flows}
+    made: dict = {}
+
+    def dis_objects(name: str):
+        """calc_deep's objects(kind) for one flow name, a DIS object per kind (as the tracker keeps them)."""
+        def get(kind):
+            if (name, kind) not in made:
+                made[name, kind] = create_dis(*flow_spec(name))
+                if isinstance(kind, int):
+                    made[name, kind].setFinestScale(kind)
+            return made[name, kind]
+        return get
     cv2.setNumThreads(1)
     for i in starts:
         j = i + gap
@@ -157,7 +168,7 @@ def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], targ
         for name in flows:
             t0 = time.perf_counter()
             start = induced_flow(depth, k_work, rel) if seeded or name == "gt" else None
-            flow = start if name == "gt" else create_dis(*flow_spec(name)).calc(gray_i, gray_j, start)
+            flow = start if name == "gt" else calc_deep(dis_objects(name), gray_i, gray_j, start, coarsest_scale)
             ms = 1000 * (time.perf_counter() - t0)
             target = flow_to_target(flow).reshape(-1, 2)[static].astype(np.float64)
             norm = max(np.linalg.norm(rel[:3, 3]), 1e-12)
@@ -191,6 +202,8 @@ def main() -> None:
                     help="gt or DIS presets; PRESET@A sets the smoothness α (e.g. medium@2)")
     ap.add_argument("--seeded", action="store_true", help="start DIS from the flow the true pose induces")
     ap.add_argument("--target-area", type=int, default=196608, help="working size in pixels (default: 384 × 512)")
+    ap.add_argument("--coarsest-scale", type=int, default=0,
+                    help="DIS's coarsest level at least 1/2^K of the working size, by padding (0: DIS's own)")
     args = ap.parse_args()
     from droidw_cli.correspondence.dis import PRESETS
 
@@ -198,7 +211,8 @@ def main() -> None:
     if unknown:
         ap.error(f"unknown flow(s) {unknown}: gt or one of {', '.join(PRESETS)}")
     rows = [row for preset in args.presets for gap in args.gaps
-            for row in measure(preset, args.seed, gap, args.pairs, args.flows, args.target_area, args.seeded)]
+            for row in measure(preset, args.seed, gap, args.pairs, args.flows, args.target_area, args.seeded,
+                                   args.coarsest_scale)]
     start = ", DIS started from the true induced flow" if args.seeded else ""
     print(f"Translation scale from the flow with exact depth (working area {args.target_area} px, BA grid 1/8{start})")
     print_table(["sequence", "gap", "flow", "‖t‖/‖t_true‖ median", "p10 / p90", "with the true rotation",

@@ -247,7 +247,7 @@ def test_smoothness_sets_the_edges_dis_alpha_and_leaves_the_fillers_flow_alone(i
     dis.match(image, shifted)
     dis.quick_target(image, shifted)
     alphas = {key: obj.getVariationalRefinementAlpha() for key, obj in dis._local.dis.items()}
-    assert alphas == {("medium", False, 2.0): pytest.approx(2.0), ("medium", False, 0.0): pytest.approx(20.0)}
+    assert alphas == {("medium", False, 2.0, None): pytest.approx(2.0), ("medium", False, 0.0, None): pytest.approx(20.0)}
     sharp = dis.flow(to_gray(image), to_gray(shifted))
     smooth = DISCorrespondence(CorrespondenceConfig(preset="medium")).flow(to_gray(image), to_gray(shifted))
     assert not np.array_equal(sharp, smooth)  # the setting reaches the flow

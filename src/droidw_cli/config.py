@@ -104,6 +104,7 @@ class CorrespondenceConfig:
     preset: str = "medium"
     quick_preset: str = "fine"  # the filler's one-way flow keyframe → frame (quick_target)
     smoothness: float = 0.0  # DIS variational refinement α of the edges' flow (0: the preset's own, 20 for medium)
+    coarsest_scale: int = 0  # DIS's coarsest level at least 1/2^k of the working size, by padding (correspondence/dis.py)
     fb_thresh: float = 1.0  # forward-backward consistency threshold, full-res px
     photo_sigma: float = 0.1  # photometric agreement scale (intensity in [0, 1])
     # px at the working resolution: no weight for pixels (or their targets) this close to the

@@ -9,10 +9,26 @@ its initialisation, which makes ~100 px motions recoverable.
 
 DIS is deterministic, also across thread counts (its spatial propagation
 uses a fixed number of stripes).
+
+DIS picks its coarsest pyramid level from the image size alone (OpenCV's
+``dis_flow.cpp``; patch size p):
+
+    L = min(⌊log2(max(H, W) / 4p) + ½⌋, ⌊log2(min(H, W) / p)⌋)
+
+so motions beyond a few patches at level L are lost, and L drops by one at a
+size threshold: MEDIUM (p = 8) takes level 4 (1/16) at 384 × 512 and at
+272 × 368, but level 3 at 272 × 360 (the ``fast`` config's working size for
+640 × 480 input), where a 40 px shift is no longer found.  With
+``correspondence.coarsest_scale`` k > 0 a flow without a start
+runs the levels beyond L first, on the images padded (edge pixels repeated,
+right and bottom) to the smallest size at which DIS reaches k relative to
+the working size (:func:`padded_size`); that flow, cropped, starts the usual
+call (:func:`calc_deep`).
 """
 
 from __future__ import annotations
 
+import math
 import threading
 
 import cv2
@@ -63,6 +79,50 @@ MEAN_FLOW_PRESET = "fast"
 # walks; "fine" instead of "fast" took the 600-frame static control from 0.51 to 0.34 cm.
 
 
+def dis_levels(height: int, width: int, patch: int) -> int:
+    """The coarsest pyramid level (scale 1/2^L) OpenCV's DIS uses for a height × width image (module docstring)."""
+    return min(int(math.log(max(height, width) / (4.0 * patch)) / math.log(2.0) + 0.5),
+               int(math.log(min(height, width) / patch) / math.log(2.0)))
+
+
+def padded_size(height: int, width: int, patch: int, level: int) -> tuple[int, int]:
+    """The smallest (H, W) ≥ (height, width) at which :func:`dis_levels` is at least ``level``: both sides
+    grown to p·2^level, then the longer one until ⌊log2(max / 4p) + ½⌋ reaches ``level``."""
+    side = patch * 2 ** level
+    h, w = max(height, side), max(width, side)
+    long = max(h, w)
+    while dis_levels(h, w, patch) < level:
+        long += 1
+        h, w = (long, w) if h >= w else (h, long)
+    return h, w
+
+
+def calc_deep(objects, gray_i: np.ndarray, gray_j: np.ndarray, start: np.ndarray | None, level: int) -> np.ndarray:
+    """DIS flow gray_i → gray_j from ``start`` (or none), reaching pyramid level ``level`` (1/2^level) at least.
+
+    ``objects(kind)`` gives the DIS objects of one preset: ``"plain"`` (for calls without a start),
+    ``"seeded"`` (with one) and an int F (finest scale F).  When no start is given and DIS's own
+    coarsest level L for this size is below ``level``, the levels it would skip run first, on the
+    images padded to :func:`padded_size` by repeating their edge pixels (finest scale L + 1, a
+    coarse image, so cheap); their flow, cropped, is the start of the usual call, which then
+    refines it from level L down.
+    """
+    h, w = gray_i.shape[:2]
+    if start is not None:
+        return objects("seeded").calc(gray_i, gray_j, start)
+    plain = objects("plain")
+    patch = plain.getPatchSize()
+    own = dis_levels(h, w, patch)
+    if level <= own:
+        return plain.calc(gray_i, gray_j, None)
+    big_h, big_w = padded_size(h, w, patch, level)
+
+    def pad(a: np.ndarray) -> np.ndarray:
+        return cv2.copyMakeBorder(a, 0, big_h - h, 0, big_w - w, cv2.BORDER_REPLICATE)
+    coarse = objects(own + 1).calc(pad(gray_i), pad(gray_j), None)
+    return objects("seeded").calc(gray_i, gray_j, np.ascontiguousarray(coarse[:h, :w]))
+
+
 def to_gray(image: np.ndarray) -> np.ndarray:
     """(H, W) contiguous uint8 grayscale of an RGB (H, W, 3) or gray (H, W) uint8 image."""
     gray = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY) if image.ndim == 3 else image
@@ -92,14 +152,17 @@ class DISCorrespondence(CorrespondenceSource):
             raise ConfigError(f"correspondence.photo_sigma must be > 0, got {cfg.photo_sigma}")
         if not cfg.border_margin >= 0:
             raise ConfigError(f"correspondence.border_margin must be >= 0, got {cfg.border_margin}")
+        if not 0 <= cfg.coarsest_scale <= 8:
+            raise ConfigError(f"correspondence.coarsest_scale must be in 0..8 (0: DIS's own), got {cfg.coarsest_scale}")
         if not cfg.smoothness >= 0:
             raise ConfigError(f"correspondence.smoothness must be >= 0 (0: the preset's own), got {cfg.smoothness}")
         self.cfg = cfg
         self._local = threading.local()  # this thread's DIS objects (an OpenCV DIS object is not thread-safe)
 
-    def _dis_of(self, name: str, seeded: bool = False, smoothness: float = 0.0):
+    def _dis_of(self, name: str, seeded: bool = False, smoothness: float = 0.0, finest: int | None = None):
         """This thread's DIS object of preset ``name`` and ``smoothness`` (:func:`create_dis`), for flows
-        with (``seeded``) or without an initial flow.
+        with (``seeded``) or without an initial flow, or with its finest scale set to ``finest``
+        (:func:`calc_deep`'s coarse levels).
 
         OpenCV's DIS keeps state between calls: a call without an initial flow that follows one
         with an initial flow starts from a leftover of it (up to 4 px difference on a walk pair
@@ -107,18 +170,22 @@ class DISCorrespondence(CorrespondenceSource):
         nothing between calls, so each result depends on its inputs only, whichever thread runs it.
         """
         objects = self._local.__dict__.setdefault("dis", {})
-        key = (name, seeded, smoothness)
+        key = (name, seeded, smoothness, finest)
         if key not in objects:
             objects[key] = create_dis(name, smoothness)
+            if finest is not None:
+                objects[key].setFinestScale(finest)
         return objects[key]
+
+    def _objects(self, name: str, smoothness: float = 0.0):
+        """``calc_deep``'s ``objects(kind)`` for preset ``name``."""
+        return lambda kind: self._dis_of(name, seeded=kind == "seeded", smoothness=smoothness,
+                                         finest=kind if isinstance(kind, int) else None)
 
     def flow(self, gray_i: np.ndarray, gray_j: np.ndarray, init_flow: np.ndarray | None = None) -> np.ndarray:
         """(H, W, 2) float32 DIS flow gray_i → gray_j, optionally started from ``init_flow``."""
-        if init_flow is None:
-            dis = self._dis_of(self.cfg.preset, smoothness=self.cfg.smoothness)
-            return np.ascontiguousarray(dis.calc(gray_i, gray_j, None), dtype=np.float32)
-        start = np.ascontiguousarray(init_flow, dtype=np.float32).copy()
-        flow = self._dis_of(self.cfg.preset, seeded=True, smoothness=self.cfg.smoothness).calc(gray_i, gray_j, start)
+        start = None if init_flow is None else np.ascontiguousarray(init_flow, dtype=np.float32).copy()
+        flow = calc_deep(self._objects(self.cfg.preset, self.cfg.smoothness), gray_i, gray_j, start, self.cfg.coarsest_scale)
         return np.ascontiguousarray(flow, dtype=np.float32)
 
     def _check(self, image_i: np.ndarray, image_j: np.ndarray, init_flow: np.ndarray | None) -> np.ndarray | None:
@@ -168,8 +235,9 @@ class DISCorrespondence(CorrespondenceSource):
     def quick_target(self, image_i: np.ndarray, image_j: np.ndarray) -> torch.Tensor:
         """Target i → j from one DIS flow (``quick_preset``) at the working resolution (no confidence)."""
         self._check(image_i, image_j, None)
-        flow = self._dis_of(self.cfg.quick_preset).calc(to_gray(image_i), to_gray(image_j), None)
-        return torch.from_numpy(flow_to_target(flow))
+        flow = calc_deep(self._objects(self.cfg.quick_preset), to_gray(image_i), to_gray(image_j), None,
+                         self.cfg.coarsest_scale)
+        return torch.from_numpy(flow_to_target(np.ascontiguousarray(flow)))
 
     def mean_flow(self, image_i: np.ndarray, image_j: np.ndarray) -> float:
         """Mean flow magnitude (full-res px) from FAST DIS on half-size grayscale images (cheap; for the motion filter)."""
@@ -181,5 +249,6 @@ class DISCorrespondence(CorrespondenceSource):
         s = MEAN_FLOW_SCALE if min(h, w) >= 16 * MEAN_FLOW_SCALE else 1
         size = (w // s, h // s)
         small = [cv2.resize(to_gray(im), size, interpolation=cv2.INTER_AREA) for im in (image_i, image_j)]
-        flow = self._dis_of(MEAN_FLOW_PRESET).calc(small[0], small[1], None)
+        level = max(0, self.cfg.coarsest_scale - int(math.log2(s))) if self.cfg.coarsest_scale > 0 else 0
+        flow = calc_deep(self._objects(MEAN_FLOW_PRESET), small[0], small[1], None, level)
         return float(np.linalg.norm(flow, axis=-1).mean() * s)

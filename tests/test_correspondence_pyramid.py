@@ -1,0 +1,130 @@
+"""DIS's coarsest pyramid level: the size rule, the padding that deepens it, and large shifts it then finds."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from droidw_cli.config import CorrespondenceConfig
+from droidw_cli.correspondence import DISCorrespondence, grid_coordinates
+from droidw_cli.correspondence.dis import calc_deep, create_dis, dis_levels, padded_size, to_gray
+from droidw_cli.errors import ConfigError
+
+SHIFT = 44  # px: found from DIS MEDIUM's level 4, lost from its level 3 (on these textures)
+
+
+def shifted_pair(h: int, w: int, dx: int = SHIFT, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Two gray crops of a random texture (Gaussian noise blurred by σ = 3 and 8 px, uint8), the content
+    of the second moved by +dx px in x."""
+    rng = np.random.default_rng(seed)
+    img = np.zeros((h + 40, w + dx + 40), np.float32)
+    for sigma in (3.0, 8.0):
+        noise = cv2.GaussianBlur(rng.standard_normal(img.shape).astype(np.float32), (0, 0), sigma)
+        img += noise / noise.std()
+    img = ((img - img.min()) / (img.max() - img.min()) * 255).astype(np.uint8)
+    return (np.ascontiguousarray(img[20:20 + h, dx + 20:dx + 20 + w]),
+            np.ascontiguousarray(img[20:20 + h, 20:20 + w]))
+
+
+def shift_error(flow: np.ndarray, dx: int = SHIFT) -> float:
+    """Median |flow − (dx, 0)| px away from the borders (where the content leaves the image)."""
+    inner = flow[16:-16, 16 + dx:-16]
+    return float(np.median(np.linalg.norm(inner - np.float32([dx, 0]), axis=-1)))
+
+
+def objects_of(name: str):
+    """calc_deep's objects(kind): one DIS object per kind."""
+    made = {}
+
+    def get(kind):
+        if kind not in made:
+            made[kind] = create_dis(name)
+            if isinstance(kind, int):
+                made[kind].setFinestScale(kind)
+        return made[kind]
+    return get
+
+
+def test_the_level_rule_predicts_where_dis_loses_a_40px_shift():
+    """At 272 × 362 MEDIUM stops at level 3 and misses a 44 px shift; at 272 × 363 it reaches level 4 and finds it."""
+    assert (dis_levels(272, 362, 8), dis_levels(272, 363, 8)) == (3, 4)
+    assert dis_levels(384, 512, 8) == 4 and dis_levels(272, 360, 8) == 3
+    for seed in range(3):
+        errors = {w: shift_error(create_dis("medium").calc(*shifted_pair(272, w, seed=seed), None)) for w in (362, 363)}
+        assert errors[362] > 20 and errors[363] < 0.5
+
+
+@pytest.mark.parametrize("h, w, level", [(272, 360, 4), (272, 360, 5), (384, 512, 5), (120, 160, 4), (100, 100, 3),
+                                         (512, 384, 5), (30, 40, 2)])
+def test_padded_size_is_the_smallest_that_reaches_the_level(h, w, level):
+    big_h, big_w = padded_size(h, w, 8, level)
+    assert big_h >= h and big_w >= w
+    assert dis_levels(big_h, big_w, 8) >= level
+    side = 8 * 2 ** level
+    if big_h > max(h, side):
+        assert dis_levels(big_h - 1, big_w, 8) < level
+    if big_w > max(w, side):
+        assert dis_levels(big_h, big_w - 1, 8) < level
+
+
+def test_padded_size_leaves_a_deep_enough_image_alone():
+    assert padded_size(384, 512, 8, 4) == (384, 512)
+    assert padded_size(272, 360, 8, 3) == (272, 360)
+
+
+def test_calc_deep_finds_the_shift_that_dis_alone_misses():
+    gray_i, gray_j = shifted_pair(272, 360)
+    plain = calc_deep(objects_of("medium"), gray_i, gray_j, None, 0)
+    deep = calc_deep(objects_of("medium"), gray_i, gray_j, None, 4)
+    assert deep.shape == (272, 360, 2) and deep.dtype == np.float32
+    assert shift_error(plain) > 20
+    assert shift_error(deep) < 0.5
+
+
+def test_each_level_more_finds_a_larger_shift():
+    """56 px: lost from level 4, found from level 5 (1/32)."""
+    gray_i, gray_j = shifted_pair(272, 360, dx=56)
+    errors = [shift_error(calc_deep(objects_of("medium"), gray_i, gray_j, None, level), dx=56) for level in (4, 5)]
+    assert errors[0] > 20 and errors[1] < 0.5
+
+
+def test_calc_deep_is_dis_itself_when_deep_enough_or_started():
+    gray_i, gray_j = shifted_pair(272, 360, dx=6)
+    assert np.array_equal(calc_deep(objects_of("medium"), gray_i, gray_j, None, 3),
+                          create_dis("medium").calc(gray_i, gray_j, None))
+    start = np.full((272, 360, 2), 5.0, np.float32)
+    seeded = create_dis("medium").calc(gray_i, gray_j, start.copy())
+    assert np.array_equal(calc_deep(objects_of("medium"), gray_i, gray_j, start.copy(), 5), seeded)
+
+
+def test_the_tracker_source_uses_the_deeper_pyramid_for_edges_filler_and_motion_filter():
+    h, w = 272, 360
+    gray_i, gray_j = shifted_pair(h, w)
+    img_i, img_j = (np.repeat(g[..., None], 3, axis=2) for g in (gray_i, gray_j))
+    expected = grid_coordinates(h // 8, w // 8) + np.float32([SHIFT / 8, 0])
+    inner = (slice(2, -2), slice(2 + SHIFT // 8, -2))
+    for level, good in ((0, False), (4, True)):
+        dis = DISCorrespondence(CorrespondenceConfig(coarsest_scale=level))
+        edge = dis.match(img_i, img_j).target.numpy()
+        quick = dis.quick_target(img_i, img_j).numpy()
+        for target in (edge, quick):
+            err = 8 * np.median(np.linalg.norm(target[inner] - expected[inner], axis=-1))
+            assert (err < 1.0) == good, (level, err)
+    # the motion filter's mean flow (FAST at half size, so the level relative to the working size less one;
+    # FAST's fewer iterations reach less far than MEDIUM from the same level)
+    means = [DISCorrespondence(CorrespondenceConfig(coarsest_scale=level)).mean_flow(img_i, img_j) for level in (0, 5)]
+    assert means[0] < 0.5 * SHIFT and abs(means[1] - SHIFT) < 2.0
+
+
+def test_deep_flows_are_deterministic():
+    gray_i, gray_j = shifted_pair(272, 360)
+    a = DISCorrespondence(CorrespondenceConfig(coarsest_scale=4)).flow(gray_i, gray_j)
+    b = DISCorrespondence(CorrespondenceConfig(coarsest_scale=4)).flow(gray_i, gray_j)
+    assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("value", [-1, 9])
+def test_a_coarsest_scale_out_of_range_is_a_config_error(value):
+    with pytest.raises(ConfigError, match="coarsest_scale"):
+        DISCorrespondence(CorrespondenceConfig(coarsest_scale=value))
