@@ -122,7 +122,7 @@ def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], targ
     """One table row per flow: the translation's scale and the rotation error over ``pairs`` pairs."""
     import cv2
 
-    from droidw_cli.correspondence.dis import calc_deep, create_dis, to_gray
+    from droidw_cli.correspondence.dis import calc_deep, dis_objects, to_gray
     from droidw_cli.correspondence.grid import area_downsample, flow_to_target
     from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics
     from droidw_cli.io.prepare import FramePreparer
@@ -144,17 +144,7 @@ def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], targ
     k_grid = scale_intrinsics(k_work, BA_SCALE)
     starts = np.linspace(0, n_frames - gap - 1, pairs).astype(int)
     stats: dict[str, list[tuple[float, float, float, float]]] = {f: [] for f in flows}
-    made: dict = {}
-
-    def dis_objects(name: str):
-        """calc_deep's objects(kind) for one flow name, a DIS object per kind (as the tracker keeps them)."""
-        def get(kind):
-            if (name, kind) not in made:
-                made[name, kind] = create_dis(*flow_spec(name))
-                if isinstance(kind, int):
-                    made[name, kind].setFinestScale(kind)
-            return made[name, kind]
-        return get
+    made: dict = {}  # the DIS objects, one per flow name and kind, as the tracker keeps them
     cv2.setNumThreads(1)
     for i in starts:
         j = i + gap
@@ -168,7 +158,8 @@ def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], targ
         for name in flows:
             t0 = time.perf_counter()
             start = induced_flow(depth, k_work, rel) if seeded or name == "gt" else None
-            flow = start if name == "gt" else calc_deep(dis_objects(name), gray_i, gray_j, start, coarsest_scale)
+            objects = dis_objects(*flow_spec(name), made)
+            flow = start if name == "gt" else calc_deep(objects, gray_i, gray_j, start, coarsest_scale)
             ms = 1000 * (time.perf_counter() - t0)
             target = flow_to_target(flow).reshape(-1, 2)[static].astype(np.float64)
             norm = max(np.linalg.norm(rel[:3, 3]), 1e-12)

@@ -8,7 +8,7 @@ import pytest
 
 from droidw_cli.config import CorrespondenceConfig
 from droidw_cli.correspondence import DISCorrespondence, grid_coordinates
-from droidw_cli.correspondence.dis import calc_deep, create_dis, dis_levels, padded_size, to_gray
+from droidw_cli.correspondence.dis import calc_deep, create_dis, dis_levels, dis_objects, padded_size
 from droidw_cli.errors import ConfigError
 
 SHIFT = 44  # px: found from DIS MEDIUM's level 4, lost from its level 3 (on these textures)
@@ -31,19 +31,6 @@ def shift_error(flow: np.ndarray, dx: int = SHIFT) -> float:
     """Median |flow − (dx, 0)| px away from the borders (where the content leaves the image)."""
     inner = flow[16:-16, 16 + dx:-16]
     return float(np.median(np.linalg.norm(inner - np.float32([dx, 0]), axis=-1)))
-
-
-def objects_of(name: str):
-    """calc_deep's objects(kind): one DIS object per kind."""
-    made = {}
-
-    def get(kind):
-        if kind not in made:
-            made[kind] = create_dis(name)
-            if isinstance(kind, int):
-                made[kind].setFinestScale(kind)
-        return made[kind]
-    return get
 
 
 def test_the_level_rule_predicts_where_dis_loses_a_40px_shift():
@@ -75,8 +62,8 @@ def test_padded_size_leaves_a_deep_enough_image_alone():
 
 def test_calc_deep_finds_the_shift_that_dis_alone_misses():
     gray_i, gray_j = shifted_pair(272, 360)
-    plain = calc_deep(objects_of("medium"), gray_i, gray_j, None, 0)
-    deep = calc_deep(objects_of("medium"), gray_i, gray_j, None, 4)
+    plain = calc_deep(dis_objects("medium"), gray_i, gray_j, None, 0)
+    deep = calc_deep(dis_objects("medium"), gray_i, gray_j, None, 4)
     assert deep.shape == (272, 360, 2) and deep.dtype == np.float32
     assert shift_error(plain) > 20
     assert shift_error(deep) < 0.5
@@ -85,17 +72,17 @@ def test_calc_deep_finds_the_shift_that_dis_alone_misses():
 def test_each_level_more_finds_a_larger_shift():
     """56 px: lost from level 4, found from level 5 (1/32)."""
     gray_i, gray_j = shifted_pair(272, 360, dx=56)
-    errors = [shift_error(calc_deep(objects_of("medium"), gray_i, gray_j, None, level), dx=56) for level in (4, 5)]
+    errors = [shift_error(calc_deep(dis_objects("medium"), gray_i, gray_j, None, level), dx=56) for level in (4, 5)]
     assert errors[0] > 20 and errors[1] < 0.5
 
 
 def test_calc_deep_is_dis_itself_when_deep_enough_or_started():
     gray_i, gray_j = shifted_pair(272, 360, dx=6)
-    assert np.array_equal(calc_deep(objects_of("medium"), gray_i, gray_j, None, 3),
+    assert np.array_equal(calc_deep(dis_objects("medium"), gray_i, gray_j, None, 3),
                           create_dis("medium").calc(gray_i, gray_j, None))
     start = np.full((272, 360, 2), 5.0, np.float32)
     seeded = create_dis("medium").calc(gray_i, gray_j, start.copy())
-    assert np.array_equal(calc_deep(objects_of("medium"), gray_i, gray_j, start.copy(), 5), seeded)
+    assert np.array_equal(calc_deep(dis_objects("medium"), gray_i, gray_j, start.copy(), 5), seeded)
 
 
 def test_the_tracker_source_uses_the_deeper_pyramid_for_edges_filler_and_motion_filter():

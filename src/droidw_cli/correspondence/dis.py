@@ -69,6 +69,29 @@ def create_dis(name: str, smoothness: float = 0.0):
         dis.setVariationalRefinementAlpha(float(smoothness))
     return dis
 
+
+def dis_objects(name: str, smoothness: float = 0.0, cache: dict | None = None):
+    """:func:`calc_deep`'s ``objects(kind)`` for preset ``name``: one DIS object per kind, created on first use
+    and kept in ``cache`` under (name, seeded, smoothness, finest scale or None).
+
+    OpenCV's DIS keeps state between calls: a call without an initial flow that follows one
+    with an initial flow starts from a leftover of it (up to 4 px difference on a walk pair
+    with MEDIUM), so calls with and without one use separate objects.  Otherwise DIS keeps
+    nothing between calls, so each result depends on its inputs only.
+    """
+    cache = {} if cache is None else cache
+
+    def get(kind):
+        finest = kind if isinstance(kind, int) else None
+        key = (name, kind == "seeded", smoothness, finest)
+        if key not in cache:
+            cache[key] = create_dis(name, smoothness)
+            if finest is not None:
+                cache[key].setFinestScale(finest)
+        return cache[key]
+    return get
+
+
 # mean_flow runs FAST DIS at 1/2 resolution: about 3 ms at 448×592 here.  ULTRAFAST at 1/4
 # (0.6 ms) reads 1-3 px of spurious mean flow on a static-camera clip (vtest), too close
 # to the motion filter's 3 px threshold; FAST at 1/2 reads 0.3-1.4 px there.
@@ -159,28 +182,10 @@ class DISCorrespondence(CorrespondenceSource):
         self.cfg = cfg
         self._local = threading.local()  # this thread's DIS objects (an OpenCV DIS object is not thread-safe)
 
-    def _dis_of(self, name: str, seeded: bool = False, smoothness: float = 0.0, finest: int | None = None):
-        """This thread's DIS object of preset ``name`` and ``smoothness`` (:func:`create_dis`), for flows
-        with (``seeded``) or without an initial flow, or with its finest scale set to ``finest``
-        (:func:`calc_deep`'s coarse levels).
-
-        OpenCV's DIS keeps state between calls: a call without an initial flow that follows one
-        with an initial flow starts from a leftover of it (up to 4 px difference on a walk pair
-        with MEDIUM), so calls with and without one use separate objects.  Otherwise DIS keeps
-        nothing between calls, so each result depends on its inputs only, whichever thread runs it.
-        """
-        objects = self._local.__dict__.setdefault("dis", {})
-        key = (name, seeded, smoothness, finest)
-        if key not in objects:
-            objects[key] = create_dis(name, smoothness)
-            if finest is not None:
-                objects[key].setFinestScale(finest)
-        return objects[key]
-
     def _objects(self, name: str, smoothness: float = 0.0):
-        """``calc_deep``'s ``objects(kind)`` for preset ``name``."""
-        return lambda kind: self._dis_of(name, seeded=kind == "seeded", smoothness=smoothness,
-                                         finest=kind if isinstance(kind, int) else None)
+        """This thread's DIS objects of preset ``name`` (:func:`dis_objects`; an OpenCV DIS object is not
+        thread-safe, so each thread, whichever runs a flow, has its own)."""
+        return dis_objects(name, smoothness, self._local.__dict__.setdefault("dis", {}))
 
     def flow(self, gray_i: np.ndarray, gray_j: np.ndarray, init_flow: np.ndarray | None = None) -> np.ndarray:
         """(H, W, 2) float32 DIS flow gray_i → gray_j, optionally started from ``init_flow``."""
