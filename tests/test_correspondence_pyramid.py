@@ -33,7 +33,7 @@ def shift_error(flow: np.ndarray, dx: int = SHIFT) -> float:
     return float(np.median(np.linalg.norm(inner - np.float32([dx, 0]), axis=-1)))
 
 
-def test_the_level_rule_predicts_where_dis_loses_a_40px_shift():
+def test_the_level_rule_predicts_where_dis_loses_a_44px_shift():
     """At 272 × 362 MEDIUM stops at level 3 and misses a 44 px shift; at 272 × 363 it reaches level 4 and finds it."""
     assert (dis_levels(272, 362, 8), dis_levels(272, 363, 8)) == (3, 4)
     assert dis_levels(384, 512, 8) == 4 and dis_levels(272, 360, 8) == 3
@@ -85,7 +85,7 @@ def test_calc_deep_is_dis_itself_when_deep_enough_or_started():
     assert np.array_equal(calc_deep(dis_objects("medium"), gray_i, gray_j, start.copy(), 5), seeded)
 
 
-def test_the_tracker_source_uses_the_deeper_pyramid_for_edges_filler_and_motion_filter():
+def test_the_source_uses_the_deeper_pyramid_for_edges_filler_and_mean_flow():
     h, w = 272, 360
     gray_i, gray_j = shifted_pair(h, w)
     img_i, img_j = (np.repeat(g[..., None], 3, axis=2) for g in (gray_i, gray_j))
@@ -98,8 +98,8 @@ def test_the_tracker_source_uses_the_deeper_pyramid_for_edges_filler_and_motion_
         for target in (edge, quick):
             err = 8 * np.median(np.linalg.norm(target[inner] - expected[inner], axis=-1))
             assert (err < 1.0) == good, (level, err)
-    # the motion filter's mean flow (FAST at half size, so the level relative to the working size less one;
-    # FAST's fewer iterations reach less far than MEDIUM from the same level)
+    # the source's mean flow (FAST at half size, so the level relative to the working size less one; FAST's
+    # fewer iterations reach less far than MEDIUM from the same level)
     means = [DISCorrespondence(CorrespondenceConfig(coarsest_scale=level)).mean_flow(img_i, img_j) for level in (0, 5)]
     assert means[0] < 0.5 * SHIFT and abs(means[1] - SHIFT) < 2.0
 

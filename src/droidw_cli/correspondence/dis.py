@@ -18,11 +18,14 @@ DIS picks its coarsest pyramid level from the image size alone (OpenCV's
 so motions beyond a few patches at level L are lost, and L drops by one at a
 size threshold: MEDIUM (p = 8) takes level 4 (1/16) at 384 × 512 and at
 272 × 368, but level 3 at 272 × 360 (the ``fast`` config's working size for
-640 × 480 input), where a 40 px shift is no longer found.  With
-``correspondence.coarsest_scale`` k > 0 a flow without a start
-runs the levels beyond L first, on the images padded (edge pixels repeated,
-right and bottom) to the smallest size at which DIS reaches k relative to
-the working size (:func:`padded_size`); that flow, cropped, starts the usual
+640 × 480 input), where a 44 px shift that level 4 finds is lost
+(``tests/test_correspondence_pyramid.py``).  With
+``correspondence.coarsest_scale`` k > 0 a flow without a start (the edges',
+the filler's and :meth:`DISCorrespondence.mean_flow`'s; the motion filter
+runs a DIS of its own, :mod:`droidw_cli.slam.motion_filter`) runs the
+levels beyond L first, on the images padded (edge pixels repeated, right
+and bottom) to the smallest size at which DIS reaches k relative to the
+working size (:func:`padded_size`); that flow, cropped, starts the usual
 call (:func:`calc_deep`).
 """
 
