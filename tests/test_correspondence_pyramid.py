@@ -104,6 +104,18 @@ def test_the_source_uses_the_deeper_pyramid_for_edges_filler_and_mean_flow():
     assert means[0] < 0.5 * SHIFT and abs(means[1] - SHIFT) < 2.0
 
 
+def test_the_motion_filter_uses_the_deeper_pyramid_too():
+    from droidw_cli.config import MotionFilterConfig
+    from droidw_cli.slam.motion_filter import MotionFilter, grey_small
+
+    img_i, img_j = (np.repeat(g[..., None], 3, axis=2) for g in shifted_pair(272, 360))
+    small = grey_small(img_i), grey_small(img_j)
+    means = [8 * MotionFilter(MotionFilterConfig(), level).flow_stats(*small).mean for level in (0, 5)]  # working px
+    source = DISCorrespondence(CorrespondenceConfig(coarsest_scale=5)).mean_flow(img_i, img_j)
+    assert means[0] < 0.5 * SHIFT and abs(means[1] - SHIFT) < 2.0
+    assert means[1] == pytest.approx(source, rel=1e-5)  # the same half-size FAST flow as the source's
+
+
 def test_deep_flows_are_deterministic():
     gray_i, gray_j = shifted_pair(272, 360)
     a = DISCorrespondence(CorrespondenceConfig(coarsest_scale=4)).flow(gray_i, gray_j)

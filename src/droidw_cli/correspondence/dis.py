@@ -21,9 +21,8 @@ size threshold: MEDIUM (p = 8) takes level 4 (1/16) at 384 × 512 and at
 640 × 480 input), where a 44 px shift that level 4 finds is lost
 (``tests/test_correspondence_pyramid.py``).  With
 ``correspondence.coarsest_scale`` k > 0 a flow without a start (the edges',
-the filler's and :meth:`DISCorrespondence.mean_flow`'s; the motion filter
-runs a DIS of its own, :mod:`droidw_cli.slam.motion_filter`) runs the
-levels beyond L first, on the images padded (edge pixels repeated, right
+the filler's, :meth:`DISCorrespondence.mean_flow`'s and the motion
+filter's, :mod:`droidw_cli.slam.motion_filter`) runs the levels beyond L first, on the images padded (edge pixels repeated, right
 and bottom) to the smallest size at which DIS reaches k relative to the
 working size (:func:`padded_size`); that flow, cropped, starts the usual
 call (:func:`calc_deep`).

@@ -11,7 +11,9 @@ a fixed camera does not, however close its movers come.
 
 The flow here is a cheap DIS FAST estimate on a half-size grey image (ULTRAFAST
 at 1/4 size reads 1-5 px of spurious mean flow on a fixed camera watching
-pedestrians).
+pedestrians).  With ``correspondence.coarsest_scale`` k > 0 its pyramid reaches
+1/2^k of the working size, as the tracker's other flows do
+(:func:`~droidw_cli.correspondence.dis.calc_deep`; level k − 1 of the half-size image).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import cv2
 import numpy as np
 
 from droidw_cli.config import MotionFilterConfig
+from droidw_cli.correspondence.dis import calc_deep, dis_objects
 from droidw_cli.geometry.camera import BA_SCALE
 
 _SCALE = 2  # the filter's flow runs at 1/2 of the working resolution
@@ -45,15 +48,16 @@ class FlowStats:
 class MotionFilter:
     """Decides keyframe candidates from flow to the last keyframe."""
 
-    def __init__(self, cfg: MotionFilterConfig):
+    def __init__(self, cfg: MotionFilterConfig, coarsest_scale: int = 0):
         self.cfg = cfg
-        self._dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_FAST)
+        self._dis = dis_objects("fast")  # DIS FAST, as calc_deep asks for it
+        self._level = max(0, coarsest_scale - int(np.log2(_SCALE))) if coarsest_scale > 0 else 0
         self._last: np.ndarray | None = None
         self._checked: tuple[np.ndarray, np.ndarray] | None = None  # (image, its small grey) of the last check
         self._since = 0
 
     def flow_stats(self, grey_a: np.ndarray, grey_b: np.ndarray, quartile: bool = False) -> FlowStats:
-        flow = self._dis.calc(grey_a, grey_b, None)
+        flow = calc_deep(self._dis, grey_a, grey_b, None, self._level)
         mag = cv2.magnitude(flow[..., 0], flow[..., 1]) * (_SCALE / BA_SCALE)  # np.linalg.norm: 15× slower
         if not quartile:
             return FlowStats(float(mag.mean()), float(np.median(mag)))

@@ -236,7 +236,7 @@ class Tracker:
         # the motion filter and each new keyframe's edge pair to the previous one run ahead on the
         # prefetch thread, beside the main thread's BA (without a prefetch thread, on the main one)
         ahead = cfg.frontend.match_ahead and cfg.io.prefetch > 0
-        scout = Scout(MotionFilter(cfg.motion_filter), timer,
+        scout = Scout(MotionFilter(cfg.motion_filter, cfg.correspondence.coarsest_scale), timer,
                       (lambda a, b: fe.match_adjacent(a, b, self.correspondence)) if ahead else None,
                       self._extract if ahead and self.features is not None else None)
         if ahead:
