@@ -22,10 +22,11 @@ size threshold: MEDIUM (p = 8) takes level 4 (1/16) at 384 × 512 and at
 (``tests/test_correspondence_pyramid.py``).  With
 ``correspondence.coarsest_scale`` k > 0 a flow without a start (the edges',
 the filler's, :meth:`DISCorrespondence.mean_flow`'s and the motion
-filter's, :mod:`droidw_cli.slam.motion_filter`) runs the levels beyond L first, on the images padded (edge pixels repeated, right
-and bottom) to the smallest size at which DIS reaches k relative to the
-working size (:func:`padded_size`); that flow, cropped, starts the usual
-call (:func:`calc_deep`).
+filter's, :mod:`droidw_cli.slam.motion_filter`) runs the levels beyond L
+first, on the images padded (edge pixels repeated, right and bottom) to the
+smallest size at which DIS reaches k relative to the working size
+(:func:`padded_size`, :func:`level_at`); that flow, cropped, starts the
+usual call (:func:`calc_deep`).
 """
 
 from __future__ import annotations
@@ -120,6 +121,12 @@ def padded_size(height: int, width: int, patch: int, level: int) -> tuple[int, i
         long += 1
         h, w = (long, w) if h >= w else (h, long)
     return h, w
+
+
+def level_at(coarsest_scale: int, downscale: int) -> int:
+    """The level, in an image ``downscale`` times smaller than the working size, that is 1/2^k of the
+    working size (k = ``coarsest_scale``; 0 stays 0, DIS's own choice)."""
+    return max(0, coarsest_scale - int(math.log2(downscale))) if coarsest_scale > 0 else 0
 
 
 def calc_deep(objects, gray_i: np.ndarray, gray_j: np.ndarray, start: np.ndarray | None, level: int) -> np.ndarray:
@@ -256,6 +263,5 @@ class DISCorrespondence(CorrespondenceSource):
         s = MEAN_FLOW_SCALE if min(h, w) >= 16 * MEAN_FLOW_SCALE else 1
         size = (w // s, h // s)
         small = [cv2.resize(to_gray(im), size, interpolation=cv2.INTER_AREA) for im in (image_i, image_j)]
-        level = max(0, self.cfg.coarsest_scale - int(math.log2(s))) if self.cfg.coarsest_scale > 0 else 0
-        flow = calc_deep(self._objects(MEAN_FLOW_PRESET), small[0], small[1], None, level)
+        flow = calc_deep(self._objects(MEAN_FLOW_PRESET), small[0], small[1], None, level_at(self.cfg.coarsest_scale, s))
         return float(np.linalg.norm(flow, axis=-1).mean() * s)

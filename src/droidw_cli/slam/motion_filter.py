@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from droidw_cli.config import MotionFilterConfig
-from droidw_cli.correspondence.dis import calc_deep, dis_objects
+from droidw_cli.correspondence.dis import calc_deep, dis_objects, level_at
 from droidw_cli.geometry.camera import BA_SCALE
 
 _SCALE = 2  # the filter's flow runs at 1/2 of the working resolution
@@ -51,7 +51,7 @@ class MotionFilter:
     def __init__(self, cfg: MotionFilterConfig, coarsest_scale: int = 0):
         self.cfg = cfg
         self._dis = dis_objects("fast")  # DIS FAST, as calc_deep asks for it
-        self._level = max(0, coarsest_scale - int(np.log2(_SCALE))) if coarsest_scale > 0 else 0
+        self._level = level_at(coarsest_scale, _SCALE)
         self._last: np.ndarray | None = None
         self._checked: tuple[np.ndarray, np.ndarray] | None = None  # (image, its small grey) of the last check
         self._since = 0
