@@ -143,6 +143,8 @@ def calc_deep(objects, gray_i: np.ndarray, gray_j: np.ndarray, start: np.ndarray
     if start is not None:
         return objects("seeded").calc(gray_i, gray_j, start)
     plain = objects("plain")
+    if level <= 0:  # DIS's own choice: the default, so nothing else on this path
+        return plain.calc(gray_i, gray_j, None)
     patch = plain.getPatchSize()
     own = dis_levels(h, w, patch)
     if level <= own:
@@ -251,7 +253,7 @@ class DISCorrespondence(CorrespondenceSource):
         self._check(image_i, image_j, None)
         flow = calc_deep(self._objects(self.cfg.quick_preset), to_gray(image_i), to_gray(image_j), None,
                          self.cfg.coarsest_scale)
-        return torch.from_numpy(flow_to_target(np.ascontiguousarray(flow)))
+        return torch.from_numpy(flow_to_target(flow))
 
     def mean_flow(self, image_i: np.ndarray, image_j: np.ndarray) -> float:
         """Mean flow magnitude (full-res px) from FAST DIS on half-size grayscale images (cheap; for the motion filter)."""
