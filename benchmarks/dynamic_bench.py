@@ -14,7 +14,7 @@ ground-truth dynamic pixels in the static point cloud, and frames/s for both run
 config, Sim(3) ATE) and RGB-D (``rgbd`` config, SE(3) ATE), each with every
 ``dynamics.mode`` asked for.  Per run: ATE, the IoU of the keyframes' dynamic
 masks (``keyframes.npz`` ``dynamic``) against the ground truth on the BA
-grid (pooled over the keyframes where a walker covers ≥ 1 cell), object-id
+grid (pooled over the keyframes where a walker covers ≥ 1 cell) with its precision and recall, object-id
 switches of the worst walker while it stays in view (:func:`id_switches`; in
 brackets the older count over all keyframes where it has an id,
 :func:`id_switches_any`), the number of object ids, the share of walkers in view whose id
@@ -202,6 +202,8 @@ def one_mode(args: argparse.Namespace) -> None:
         pred = result.kf_dynamic
         seen = truth.reshape(len(truth), -1).any(1)
         out["iou"] = float((pred & truth)[seen].sum() / max(1, (pred | truth)[seen].sum()))
+        out["precision"] = float((pred & truth)[seen].sum() / max(1, pred[seen].sum()))
+        out["recall"] = float((pred & truth)[seen].sum() / max(1, truth[seen].sum()))
         out["id_switches"] = id_switches(inst, result.kf_object_ids)
         out["id_switches_any"] = id_switches_any(inst, result.kf_object_ids)
         out["id_shared"] = id_shared(inst, result.kf_object_ids)
@@ -222,12 +224,14 @@ def modes_table(args: argparse.Namespace) -> None:
             ate = r["se3_cm"] if config == "rgbd" else r["sim3_cm"]
             rows.append([preset, "RGB-D" if config == "rgbd" else "mono", mode,
                          f"{ate:.2f} ({'SE3' if config == 'rgbd' else 'Sim3'})", f"{r.get('iou', float('nan')):.2f}",
+                         f"{r.get('precision', float('nan')):.2f} / {r.get('recall', float('nan')):.2f}",
                          f"{r['id_switches']} ({r['id_switches_any']})" if "id_switches" in r else "–",
                          r.get("objects", "–"), f"{100 * r['id_shared']:.0f}" if "id_shared" in r else "–",
                          f"{100 * r['static_dynamic_share']:.2f}", f"{r['fps']:.2f}"])
             print(" | ".join(str(c) for c in rows[-1]), file=sys.stderr, flush=True)
     print(f"\nMask modes, monocular and RGB-D, 640x480 presets (seed {args.seeds[0]})")
-    print_table(["sequence", "input", "dynamics.mode", "ATE [cm]", "mask IoU", "id switches in view (any)",
+    print_table(["sequence", "input", "dynamics.mode", "ATE [cm]", "mask IoU", "mask precision / recall",
+                 "id switches in view (any)",
                  "objects", "ids shared [%]", "dynamic in static PLY [%]", "frames/s"], rows)
 
 

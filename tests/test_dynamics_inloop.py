@@ -142,6 +142,26 @@ def test_segmenter_interface():
         get_segmenter("mobilesam")
 
 
+def test_detection_gives_the_segmenter_the_grids_focal_lengths():
+    """The grower's slant limit needs them (dynamics/refine.py: surface_slant)."""
+    masks = KeyframeMasks(DynamicsConfig(mode="both"), (H, W), consistency=True)
+    calls = []
+    grower = masks.segmenter
+
+    class Spy:
+        def segment(self, seeds, image, depth, focal=None):
+            calls.append(focal)
+            return grower.segment(seeds, image, depth, focal=focal)
+
+    masks.segmenter = Spy()
+    disps = torch.full((3, H, W), 0.5)
+    for k in range(3):
+        masks.append(_image(BLOCK))
+        disps[k][BLOCK] = 1.0
+    assert masks.detect(2, _poses(3), disps, K8, [0, 1]) is not None
+    assert calls == [(30.0, 30.0)]
+
+
 def test_a_predicted_centre_keeps_the_id_across_a_large_image_motion():
     from droidw_cli.dynamics.tracker import DynamicObjectTracker
 

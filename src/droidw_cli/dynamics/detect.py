@@ -54,7 +54,8 @@ def detect_frame(images: Tensor, disps: Tensor, poses_w2c: Tensor, intrinsics: T
     disp = disps[target]
     maps = inconsistency(images[target], disp, pred_rgb, pred_disp, valid, tau_scale, params)
     depth = torch.where(disp > 0, 1.0 / torch.where(disp > 0, disp, torch.ones_like(disp)), torch.zeros_like(disp))
-    objects = refine_mask(maps.m_dyn, images[target].to(disp.dtype), depth, params)
+    objects = refine_mask(maps.m_dyn, images[target].to(disp.dtype), depth, params,
+                          focal=(float(intrinsics[0]), float(intrinsics[1])))
     return FrameDetection(target, tuple(int(s) for s in sources), maps, objects)
 
 

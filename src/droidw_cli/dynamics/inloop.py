@@ -237,7 +237,7 @@ class KeyframeMasks:
         if float(maps.m_dyn.float().mean()) > MAX_MASKED:
             return None
         depth = torch.where(d[t] > 0, 1.0 / d[t].clamp(min=1e-6), torch.zeros_like(d[t]))
-        objects = self.segmenter.segment(maps.m_dyn, images[t], depth)
+        objects = self.segmenter.segment(maps.m_dyn, images[t], depth, focal=(float(kk[0]), float(kk[1])))
         if float(objects.mask.float().mean()) > MAX_MASKED:
             return None
         return objects

@@ -150,8 +150,9 @@ def _predict(history: dict[int, list[tuple[int, np.ndarray]]], tracker: DynamicO
 
 def _propagate(masks: KeyframeMasks, mask: Tensor, image: Tensor, depth: Tensor, tracker: DynamicObjectTracker,
                stats: dict[int, tuple[Tensor, float, float]], cfg: DynamicsConfig,
-               predicted: dict[int, list[tuple[float, float]]]) -> Tensor:
-    """``mask`` plus the objects grown from the (predicted) centres of active tracks it misses."""
+               predicted: dict[int, list[tuple[float, float]]], focal: tuple[float, float]) -> Tensor:
+    """``mask`` plus the objects grown from the (predicted) centres of active tracks it misses (``focal``:
+    the grid's (f_x, f_y), for the grower's slant limit)."""
     if masks.segmenter is None or not tracker.active:
         return mask
     h, w = mask.shape
@@ -169,7 +170,7 @@ def _propagate(masks: KeyframeMasks, mask: Tensor, image: Tensor, depth: Tensor,
             continue
         seed = torch.zeros_like(mask)  # a 3 × 3 prompt at the centre (a seed needs min_seed_area pixels)
         seed[max(0, y - 1):y + 2, max(0, x - 1):x + 2] = True
-        grown = masks.segmenter.segment(seed, image, depth).mask & ~out
+        grown = masks.segmenter.segment(seed, image, depth, focal=focal).mask & ~out
         area = int(grown.sum())
         if obj.area / cfg.track_growth <= area <= obj.area * cfg.track_growth:
             out |= grown
@@ -274,7 +275,8 @@ def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, in
     for k in range(n):
         depth = _depth(d[k])
         predicted, predicted_depth = _predict(history, tracker, times, k, c2w, kk)
-        mask = _propagate(masks, dynamic[k], masks.image(k), depth, tracker, stats, cfg, predicted)
+        mask = _propagate(masks, dynamic[k], masks.image(k), depth, tracker, stats, cfg, predicted,
+                          (float(kk[0]), float(kk[1])))
         dynamic[k] = mask
         depth_np = depth.numpy().astype(np.float64)
         carried = _carry(masks, k, ids[k - 1] if k and not sensor_depth else None)

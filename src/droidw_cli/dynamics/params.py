@@ -30,6 +30,10 @@ class DetectionParams:
         min_seed_area: seed components smaller than this (pixels) are dropped.
     Region growing (the MobileSAM substitute):
         grow_steps: at most this many 4-neighbour dilation steps.
+        depth_step_tol: a pixel is grown from a neighbour only when their depths differ by at most this
+            fraction of its own (0: no limit), so a walker does not run into a wall of its colour behind it.
+        max_slant: with the grid's focal lengths, a grown pixel's surface faces the camera within
+            this many degrees (:func:`droidw_cli.dynamics.refine.surface_slant`; 90 = no limit).
         max_growth: if > 0, a component stops growing once its area reaches
             max_growth × its seed area (a guard against leaks; off by default).
         color_tol: a grown pixel's colour lies within
@@ -47,7 +51,14 @@ class DetectionParams:
     sign_margin: float = 0.05
     min_fraction: float = 0.5
     min_seed_area: int = 2
-    grow_steps: int = 8
+    # Eight steps without these limits ran from a walker's feet into the floor, whose depth and colour continue
+    # theirs (RGB-D stopgo s2: 79 % of the false-positive cells in the bottom 9 of 48 rows, mask precision 0.88),
+    # and joined walkers through it.  The floor is seen at about 55-65° (grown floor cells, quartiles), a walker
+    # mostly under 45°.  With the slant and depth-step limits growth stops at the floor and at walls behind, and
+    # may run longer: RGB-D mask IoU over 8 sequences 0.849 -> 0.900 (README, "Region growing").
+    grow_steps: int = 24
+    depth_step_tol: float = 0.05
+    max_slant: float = 55.0
     max_growth: float = 0.0
     color_tol: float = 0.15
     color_spread: float = 2.5
@@ -69,5 +80,9 @@ class DetectionParams:
             raise ValueError(f"max_growth must be >= 0, got {self.max_growth}")
         if self.grow_steps < 0 or self.min_seed_area < 1 or self.min_object_area < 1:
             raise ValueError("need grow_steps >= 0, min_seed_area >= 1 and min_object_area >= 1")
+        if self.depth_step_tol < 0:
+            raise ValueError(f"depth_step_tol must be >= 0, got {self.depth_step_tol}")
+        if not 0 < self.max_slant <= 90:
+            raise ValueError(f"max_slant must be in (0, 90] degrees, got {self.max_slant}")
         if self.color_tol < 0 or self.color_spread < 0 or self.depth_rel_tol < 0:
             raise ValueError("color_tol, color_spread and depth_rel_tol must be >= 0")

@@ -12,12 +12,15 @@ seed is grown instead over pixels that look alike and lie at a similar depth:
 3. Growth, repeated at most ``grow_steps`` times or until nothing changes
    (and, with ``max_growth`` > 0, stopped per component once it has
    ``max_growth`` times its seed's area):
-   every unlabelled pixel p takes the largest label L among its 4-neighbours
-   when
+   every unlabelled pixel p takes the largest label L among its 4-neighbours q
+   with |D_p − D_q| ≤ depth_step_tol · D_p (no label crosses a depth edge) when
        ‖I_p − μ_L‖ ≤ t_L   and   |D_p − δ_L| ≤ depth_rel_tol · δ_L   (D_p > 0),
    i.e. a morphological dilation masked by the per-component similarity test,
    done with tensor shifts (no pixel loops).  The statistics stay those of
-   the seed, so the region cannot drift along a gradient.
+   the seed, so the region cannot drift along a gradient.  With the grid's
+   focal lengths, a pixel is added only where the surface faces the camera
+   within ``max_slant`` (:func:`surface_slant`): the floor at a walker's feet
+   continues the walker's depth and colour, but is seen at a grazing angle.
 4. Components smaller than ``min_object_area`` after growing are dropped.
 
 Centre of an object: the maximum of the Euclidean distance transform
@@ -28,6 +31,7 @@ first pixel in row-major order.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -90,12 +94,49 @@ def _relabel(labels: Tensor, min_area: int) -> Tensor:
     return new[labels]
 
 
+def _neighbours(x: Tensor) -> Tensor:
+    """(4, h, w): each pixel's neighbour above, below, left and right (0 beyond the border)."""
+    padded = torch.nn.functional.pad(x, (1, 1, 1, 1))
+    return torch.stack((padded[:-2, 1:-1], padded[2:, 1:-1], padded[1:-1, :-2], padded[1:-1, 2:]))
+
+
+def surface_slant(depth: Tensor, focal: tuple[float, float]) -> Tensor:
+    """tan θ per pixel (h, w), θ the angle between the surface normal and the optical axis; inf where unknown.
+
+    For a plane n·X = c the depth along the ray K⁻¹p̃ is D = c / (n·K⁻¹p̃), so
+    f_x ∂D/∂u / D = −n_x / (n·K⁻¹p̃) and likewise in v:
+
+        tan θ = sqrt((f_x ∂D/∂u)² + (f_y ∂D/∂v)²) / D
+
+    (exact at the principal point).  Each derivative is the smaller of the
+    forward and backward differences, so a pixel beside a depth edge keeps the
+    slope of its own side.  A fronto-parallel walker reads about 0, the floor a
+    few metres ahead of a camera at head height about tan 60°.
+    """
+    inf = torch.full_like(depth, float("inf"))
+    known = depth > 0
+
+    def smaller_step(dim: int) -> Tensor:
+        step = (depth.diff(dim=dim)).abs()
+        both = known.narrow(dim, 0, step.shape[dim]) & known.narrow(dim, 1, step.shape[dim])
+        step = torch.where(both, step, torch.full_like(step, float("inf")))
+        fwd, bwd = inf.clone(), inf.clone()
+        fwd.narrow(dim, 0, step.shape[dim]).copy_(step)
+        bwd.narrow(dim, 1, step.shape[dim]).copy_(step)
+        return torch.minimum(fwd, bwd)
+
+    du, dv = smaller_step(1), smaller_step(0)
+    slant = torch.sqrt((focal[0] * du) ** 2 + (focal[1] * dv) ** 2) / depth.clamp(min=1e-6)
+    return torch.where(known, slant, inf)
+
+
 def grow_regions(labels: Tensor, image: Tensor, depth: Tensor, params: DetectionParams | None = None,
-                 allowed: Tensor | None = None) -> Tensor:
+                 allowed: Tensor | None = None, focal: tuple[float, float] | None = None) -> Tensor:
     """Grow labelled seeds (h, w) over similar pixels (see the module docstring, steps 2-3).
 
     ``image`` (h, w, 3) colour in [0, 1], ``depth`` (h, w) metres (≤ 0 unknown); ``allowed``
-    (h, w) bool, optional, further restricts the pixels that may be added.
+    (h, w) bool, optional, further restricts the pixels that may be added; ``focal`` (f_x, f_y) of
+    the grid in pixels turns on the slant limit (``params.max_slant``).
     """
     params = params or DetectionParams()
     h, w = labels.shape
@@ -104,6 +145,9 @@ def grow_regions(labels: Tensor, image: Tensor, depth: Tensor, params: Detection
     count = int(labels.max()) if labels.numel() else 0
     if count == 0 or params.grow_steps == 0:
         return labels.clone()
+    if focal is not None and params.max_slant < 90:
+        facing = surface_slant(depth, focal) <= math.tan(math.radians(params.max_slant))
+        allowed = facing if allowed is None else allowed & facing
     image = image.to(depth.dtype)
     flat = labels.reshape(-1)
     seed = flat > 0
@@ -124,9 +168,16 @@ def grow_regions(labels: Tensor, image: Tensor, depth: Tensor, params: Detection
 
     lab = labels.clone()
     cap = params.max_growth * n_pix[:, 0] if params.max_growth > 0 else None
+    # a neighbour passes its label on only across a depth step of at most depth_step_tol of the pixel's depth
+    continuous = None
+    if params.depth_step_tol > 0:
+        near = _neighbours(depth)
+        continuous = (near - depth).abs() <= params.depth_step_tol * depth
     for _ in range(params.grow_steps):
-        padded = torch.nn.functional.pad(lab, (1, 1, 1, 1))
-        cand = torch.stack((padded[:-2, 1:-1], padded[2:, 1:-1], padded[1:-1, :-2], padded[1:-1, 2:])).amax(0)
+        near = _neighbours(lab)
+        if continuous is not None:
+            near = torch.where(continuous, near, torch.zeros_like(near))
+        cand = near.amax(0)
         if cap is not None:
             full = torch.bincount(lab.reshape(-1), minlength=count + 1).to(cap.dtype) >= cap
             full[0] = True
@@ -179,9 +230,9 @@ def make_objects(labels: Tensor, min_area: int = 1) -> Objects:
 
 
 def refine_mask(seed: Tensor, image: Tensor, depth: Tensor, params: DetectionParams | None = None,
-                allowed: Tensor | None = None) -> Objects:
+                allowed: Tensor | None = None, focal: tuple[float, float] | None = None) -> Objects:
     """Seed mask (h, w) → grown, labelled objects with their centres (steps 1-4)."""
     params = params or DetectionParams()
     labels = label_components(seed, params.min_seed_area)
-    grown = grow_regions(labels, image, depth, params, allowed)
+    grown = grow_regions(labels, image, depth, params, allowed, focal)
     return make_objects(grown, params.min_object_area)

@@ -4,10 +4,11 @@ ADD-SLAM prompts MobileSAM with the inscribed-circle centre of each seed
 region.  MobileSAM's weights cannot be obtained here, so the step sits behind
 a small interface that a promptable segmenter can implement:
 
-    segment(seeds, image, depth) → Objects
+    segment(seeds, image, depth, focal=None) → Objects
 
 * ``seeds`` (h, w) bool: the dynamic seed pixels M_ic^d (or a few prompt pixels);
 * ``image`` (h, w, 3) colour in [0, 1], ``depth`` (h, w) metres (≤ 0 unknown);
+* ``focal`` (f_x, f_y) of this grid in pixels, or None (the grower then has no slant limit);
 * the result is labelled objects 1…C with inscribed-circle centres
   (:class:`~droidw_cli.dynamics.refine.Objects`).
 
@@ -37,7 +38,8 @@ ENTRY_POINT_GROUP = "droidw.segmenters"
 class Segmenter(Protocol):
     """Turns dynamic seeds into whole labelled objects."""
 
-    def segment(self, seeds: Tensor, image: Tensor, depth: Tensor) -> Objects: ...
+    def segment(self, seeds: Tensor, image: Tensor, depth: Tensor,
+                focal: tuple[float, float] | None = None) -> Objects: ...
 
 
 class RegionGrower:
@@ -48,8 +50,9 @@ class RegionGrower:
     def __init__(self, params: DetectionParams | None = None) -> None:
         self.params = params or DetectionParams()
 
-    def segment(self, seeds: Tensor, image: Tensor, depth: Tensor) -> Objects:
-        return refine_mask(seeds, image.to(depth.dtype), depth, self.params)
+    def segment(self, seeds: Tensor, image: Tensor, depth: Tensor,
+                focal: tuple[float, float] | None = None) -> Objects:
+        return refine_mask(seeds, image.to(depth.dtype), depth, self.params, focal=focal)
 
 
 BUILTIN: dict[str, Callable[[DetectionParams], Segmenter]] = {"grow": RegionGrower}
