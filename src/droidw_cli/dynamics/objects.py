@@ -272,11 +272,11 @@ def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, in
     c2w = to_matrix(invert(g)) if n else np.zeros((0, 4, 4))
     history: dict[int, list[tuple[int, np.ndarray]]] = {}  # id → (keyframe, world centroid) so far
     times = np.asarray(masks.times, dtype=np.float64)
+    focal = (float(kk[0]), float(kk[1]))
     for k in range(n):
         depth = _depth(d[k])
         predicted, predicted_depth = _predict(history, tracker, times, k, c2w, kk)
-        mask = _propagate(masks, dynamic[k], masks.image(k), depth, tracker, stats, cfg, predicted,
-                          (float(kk[0]), float(kk[1])))
+        mask = _propagate(masks, dynamic[k], masks.image(k), depth, tracker, stats, cfg, predicted, focal)
         dynamic[k] = mask
         depth_np = depth.numpy().astype(np.float64)
         carried = _carry(masks, k, ids[k - 1] if k and not sensor_depth else None)

@@ -113,21 +113,11 @@ def surface_slant(depth: Tensor, focal: tuple[float, float]) -> Tensor:
     slope of its own side.  A fronto-parallel walker reads about 0, the floor a
     few metres ahead of a camera at head height about tan 60°.
     """
-    inf = torch.full_like(depth, float("inf"))
-    known = depth > 0
-
-    def smaller_step(dim: int) -> Tensor:
-        step = (depth.diff(dim=dim)).abs()
-        both = known.narrow(dim, 0, step.shape[dim]) & known.narrow(dim, 1, step.shape[dim])
-        step = torch.where(both, step, torch.full_like(step, float("inf")))
-        fwd, bwd = inf.clone(), inf.clone()
-        fwd.narrow(dim, 0, step.shape[dim]).copy_(step)
-        bwd.narrow(dim, 1, step.shape[dim]).copy_(step)
-        return torch.minimum(fwd, bwd)
-
-    du, dv = smaller_step(1), smaller_step(0)
+    near = _neighbours(depth)  # above, below, left, right; 0 where unknown or beyond the border
+    step = torch.where(near > 0, (near - depth).abs(), torch.full_like(near, float("inf")))
+    dv, du = step[:2].amin(0), step[2:].amin(0)
     slant = torch.sqrt((focal[0] * du) ** 2 + (focal[1] * dv) ** 2) / depth.clamp(min=1e-6)
-    return torch.where(known, slant, inf)
+    return torch.where(depth > 0, slant, torch.full_like(slant, float("inf")))
 
 
 def grow_regions(labels: Tensor, image: Tensor, depth: Tensor, params: DetectionParams | None = None,
