@@ -17,9 +17,10 @@
 #             on 2 cores (taskset -c 0,1)
 # A step that fails or runs out of time does not stop the later ones.  STEPS="build track" (say) runs only
 # those groups of steps, in the order above.  On an H100 (2026-11-26, 16 cores) build took 84 s, cudatests
-# 40 s, ba 78 s and its two windows 21 s, suite more than 150 s in 8 processes (it stopped at 94 %), and
-# the cuda walk 50 s after rendering the sequence (about 25 s a preset): all of it does not fit in one
-# 10-minute call, so choose the steps when the device time is short.
+# 40 s, ba 78 s and its two windows 21 s, suite more than 150 s in 8 processes (it stopped at 94 %); the
+# walk tracked at 15 frames/s on cuda and 8 on 2 cores (30 and 56 s), once its sequence was rendered (22 s a
+# preset on a 2-core machine).  All of it does not fit in one 10-minute call: choose the steps when the
+# device time is short.
 set -u
 OUTDIR=${1:-${OUT:-/tmp/gpu_check}}
 mkdir -p "$OUTDIR"
