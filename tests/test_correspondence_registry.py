@@ -18,6 +18,8 @@ from droidw_cli.correspondence import registry
 from droidw_cli.correspondence.grid import grid_coordinates
 from droidw_cli.errors import UserError
 
+from fake_plugins import FakeEntryPoint, plug_entry_points
+
 
 class IdentitySource(CorrespondenceSource):
     name = "identity"
@@ -31,18 +33,8 @@ class IdentitySource(CorrespondenceSource):
         return Correspondence(np.zeros((h, w, 2), np.float32), g, torch.ones_like(g))
 
 
-class FakeEntryPoint:
-    def __init__(self, name, obj, value="fake.module:obj"):
-        self.name, self.value, self._obj = name, value, obj
-
-    def load(self):
-        if isinstance(self._obj, Exception):
-            raise self._obj
-        return self._obj
-
-
 def plug(monkeypatch, *eps):
-    monkeypatch.setattr(registry, "entry_points", lambda group: [ep for ep in eps if group == registry.ENTRY_POINT_GROUP])
+    plug_entry_points(monkeypatch, registry, *eps)
 
 
 def test_builtin_dis_uses_the_config():

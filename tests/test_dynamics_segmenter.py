@@ -12,6 +12,8 @@ from droidw_cli.dynamics.params import DetectionParams
 from droidw_cli.dynamics.refine import label_components, make_objects
 from droidw_cli.errors import UserError
 
+from fake_plugins import FakeEntryPoint, plug_entry_points
+
 
 class SeedsOnly:
     """A segmenter that keeps the seed components as they are (the docs' example, docs/plugins.md)."""
@@ -25,19 +27,8 @@ class SeedsOnly:
         return make_objects(label_components(seeds, self.params.min_seed_area), self.params.min_object_area)
 
 
-class FakeEntryPoint:
-    def __init__(self, name, obj, value="fake.module:obj"):
-        self.name, self.value, self._obj = name, value, obj
-
-    def load(self):
-        if isinstance(self._obj, Exception):
-            raise self._obj
-        return self._obj
-
-
 def plug(monkeypatch, *eps):
-    monkeypatch.setattr(registry, "entry_points",
-                        lambda group: [ep for ep in eps if group == registry.ENTRY_POINT_GROUP])
+    plug_entry_points(monkeypatch, registry, *eps)
 
 
 def test_plugin_is_found_and_used_by_the_keyframe_masks(monkeypatch):

@@ -9,6 +9,8 @@ from droidw_cli.errors import UserError
 from droidw_cli.features import FeatureExtractor, available_feature_extractors, get_feature_extractor
 from droidw_cli.features import registry
 
+from fake_plugins import FakeEntryPoint, plug_entry_points
+
 
 class ConstantExtractor(FeatureExtractor):
     name = "constant"
@@ -24,18 +26,8 @@ class ConstantExtractor(FeatureExtractor):
         return out
 
 
-class FakeEntryPoint:
-    def __init__(self, name, obj, value="fake.module:obj"):
-        self.name, self.value, self._obj = name, value, obj
-
-    def load(self):
-        if isinstance(self._obj, Exception):
-            raise self._obj
-        return self._obj
-
-
 def plug(monkeypatch, *eps):
-    monkeypatch.setattr(registry, "entry_points", lambda group: [ep for ep in eps if group == registry.ENTRY_POINT_GROUP])
+    plug_entry_points(monkeypatch, registry, *eps)
 
 
 def test_builtin_xfeat():
