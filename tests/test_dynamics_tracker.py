@@ -204,6 +204,10 @@ def test_depth_components_cut_at_depth_steps():
     assert len(np.unique(depth_components(mask, slope, 0.15)[mask])) == 1
     objs = DynamicObjectTracker().update(mask, depth=depth)
     assert len(objs) == 2
+    # two walkers side by side, 14 % apart in depth (log 0.13): two objects at the default step, one at 0.15
+    near = np.where(np.arange(W)[None, :] < 20, 2.0, 2.28).repeat(H, 0)
+    assert len(DynamicObjectTracker().update(mask, depth=near)) == 2
+    assert len(DynamicObjectTracker(depth_step=0.15).update(mask, depth=near)) == 1
 
 
 def test_shift_mask_drops_what_leaves_the_image():

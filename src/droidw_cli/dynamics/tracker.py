@@ -152,8 +152,10 @@ class DynamicObjectTracker:
     min_overlap: float = 0.25
     max_missed: int = 2
     depth_tol: float = 0.7  # benchmarks/id_replay.py, RGB-D seeds 1-3: switches summed 41 at 0.5, 35 at 0.7 (no run
-    #                         worse; seed 3, held out: 17 → 16), 37 at 0.6, 38 at 0.8 and 1.0 (README)
-    depth_step: float = 0.15
+    #                         worse; seed 3, held out: 17 → 16), 37 at 0.6, 38 at 0.8 and 1.0 (docs/benchmarks.md)
+    depth_step: float = 0.12  # id_replay.py, RGB-D captures of seeds 1-3 (2026-11-27): switches summed 41 at 0.15,
+    #                          38 at 0.14, 35 at 0.13, 34 at 0.12 (no capture worse), 35 at 0.11, 36 at 0.10, 40 at
+    #                          0.06 (docs/benchmarks.md, "Object ids: the depth step")
     occluded: float = 0.5
     split_px: float = 2.0
     split_depth: float = 0.1
