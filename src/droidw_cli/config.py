@@ -244,7 +244,7 @@ class FillerConfig:
     uncertainty: bool = True  # weight the keyframes' pixels by their uncertainty
     # share of the baseline (0: any).  Wobble (1-2.5 cm failed refinements): 0.5: 0.36 → 0.33 cm mono, 0.61 → 0.39 RGB-D (SE(3)); the rest within 0.01 cm
     max_departure: float = 0.5
-    smooth: int = 1  # passes (0: off); README "What the filler adds to the error"
+    smooth: int = 1  # passes (0: off); docs/benchmarks.md "What the filler adds to the error"
     stride: int = 1
 
     def __post_init__(self) -> None:

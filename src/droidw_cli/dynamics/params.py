@@ -55,7 +55,7 @@ class DetectionParams:
     # theirs (RGB-D stopgo s2: 79 % of the false-positive cells in the bottom 9 of 48 rows, mask precision 0.88),
     # and joined walkers through it.  The floor is seen at about 55-65° (grown floor cells, quartiles), a walker
     # mostly under 45°.  With the slant and depth-step limits growth stops at the floor and at walls behind, and
-    # may run longer: RGB-D mask IoU over 8 sequences 0.849 -> 0.900 (README, "Region growing").
+    # may run longer: RGB-D mask IoU over 8 sequences 0.849 -> 0.900 (docs/benchmarks.md, "Region growing").
     grow_steps: int = 24
     depth_step_tol: float = 0.05
     max_slant: float = 55.0

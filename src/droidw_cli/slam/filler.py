@@ -431,7 +431,7 @@ def smooth_departures(init: Tensor, poses: Tensor, passes: int, closed: bool) ->
     δ_t = Log(G_t G_int,t⁻¹); each pass replaces δ_t by (δ_{t−1} + 2 δ_t + δ_{t+1}) / 4, with δ = 0 at the
     gap's keyframes (both ends when ``closed``, else the last frame repeated), and G_t = Exp(δ_t) G_int,t.
     The refined departures err smoothly within a gap more than from frame to frame, so one pass gains a
-    little everywhere measured (README, "What the filler adds to the error").
+    little everywhere measured (docs/benchmarks.md, "What the filler adds to the error").
     """
     if passes <= 0 or len(poses) < 2:
         return poses
