@@ -114,3 +114,40 @@ def test_strided_frame_distance_matches_the_full_grid():
     full = frame_distance(poses, disps, k, ii, jj)
     coarse = frame_distance(poses, disps, k, ii, jj, stride=4)
     assert torch.allclose(coarse, full, rtol=0.1)
+
+
+def test_the_global_ba_runs_on_its_own_thread_count_and_restores_the_callers(monkeypatch):
+    """The global BA runs while the frontend's workers idle, so it gets every usable core (slam/threads.py)."""
+    import droidw_cli.slam.backend as backend_module
+
+    fe, cfg, _ = _loop_frontend(12, ["backend.every=0", "backend.iters=1"])
+    seen = []
+    real = backend_module.run_window
+
+    def recording(*args, **kwargs):
+        seen.append(torch.get_num_threads())
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(backend_module, "run_window", recording)
+    before = torch.get_num_threads()
+    GlobalBackend(fe, cfg.backend, threads=3).run(1)
+    GlobalBackend(fe, cfg.backend).run(1)  # 0: the caller's count
+    assert seen == [3, before]
+    assert torch.get_num_threads() == before
+
+
+def test_torch_threads_leave_a_core_to_the_workers_except_when_alone(monkeypatch):
+    import droidw_cli.slam.threads as threads
+
+    for cores, busy, alone in [(1, 1, 1), (2, 1, 2), (4, 3, 4), (16, 8, 8)]:
+        monkeypatch.setattr(threads, "usable_cores", lambda c=cores: c)
+        assert threads.torch_threads(0) == busy and threads.torch_threads(0, alone=True) == alone
+    assert threads.torch_threads(5) == 5 and threads.torch_threads(5, alone=True) == 5  # asked for: kept
+    before = torch.get_num_threads()
+    try:
+        with threads.torch_threads_set(2):
+            assert torch.get_num_threads() == 2
+            raise RuntimeError
+    except RuntimeError:
+        pass
+    assert torch.get_num_threads() == before

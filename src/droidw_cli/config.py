@@ -340,7 +340,7 @@ class TrackConfig:
     uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
     ba: BAParams = field(default_factory=BAParams)
     seed: int = 0
-    # torch intra-op threads of the BA; 0: one less than the usable cores (1 on 2 cores, at most 8).
+    # torch intra-op threads of the BA; 0: one less than the usable cores (1 on 2 cores, at most 8), all in the global BA.
     # On 2 cores, 2 torch threads stall whenever anything else runs (ba_step 25/75: 852 ms against
     # 20 ms with 1 thread while other processes were busy), and the prefetch thread and DIS need a core.
     threads: int = 0

@@ -37,6 +37,7 @@ from droidw_cli.slam.distance import frame_distance
 from droidw_cli.slam.frontend import Frontend
 from droidw_cli.slam.heap import large_blocks_mapped, release_free_memory
 from droidw_cli.slam.optimizer import run_window
+from droidw_cli.slam.threads import torch_threads_set
 
 #: the candidates' frame distance is averaged over every DISTANCE_STRIDE-th grid pixel
 DISTANCE_STRIDE = 4
@@ -70,9 +71,10 @@ class KeyframeImages:
 class GlobalBackend:
     """Periodic and final bounded global BA with proximity edges (module docstring)."""
 
-    def __init__(self, frontend: Frontend, cfg: BackendConfig):
+    def __init__(self, frontend: Frontend, cfg: BackendConfig, threads: int = 0):
         self.fe = frontend
         self.cfg = cfg
+        self.threads = threads  # torch threads of its BA (0: as the caller has them); the frontend's workers idle then
         self.images = KeyframeImages(cfg.image_quality)
         self.searched = 0  # keyframes below this index have had their proximity candidates evaluated
         self.last_run = 0  # keyframe count at the last run
@@ -146,6 +148,6 @@ class GlobalBackend:
         if params.optimize_focal != "none":
             params = dataclasses.replace(params, optimize_focal="none")  # calibration is settled by now
         fixed = 1 if lo == 0 else 2
-        with torch.no_grad():
+        with torch.no_grad(), torch_threads_set(self.threads or torch.get_num_threads()):
             return run_window(fe.backend, fe.buffer, lo, n, edges, params, fe.shared, iters, fixed=fixed,
                               optimize_theta=not params.uncertainty.freeze_in_global, robust_sigma=self.cfg.robust_sigma)

@@ -10,7 +10,6 @@ filler composes every frame's pose with its keyframe's final pose.
 from __future__ import annotations
 
 import dataclasses
-import os
 import time
 import warnings
 from collections.abc import Iterator
@@ -40,6 +39,7 @@ from droidw_cli.slam.frontend import Frontend
 from droidw_cli.slam.motion_filter import MotionFilter
 from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.scout import Scout
+from droidw_cli.slam.threads import torch_threads, torch_threads_set
 from droidw_cli.slam.timing import StageTimer, Timed
 
 
@@ -138,14 +138,6 @@ def _confidence_half(fe: Frontend, chunk: int = 256) -> np.ndarray:
     return out
 
 
-def torch_threads(requested: int) -> int:
-    """Torch threads for ``threads`` = requested (0: usable cores − 1, clamped to 1 … 8)."""
-    if requested > 0:
-        return requested
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return max(1, min(cores - 1, 8))
-
-
 class Tracker:
     """Runs the pipeline over one frame source."""
 
@@ -207,12 +199,8 @@ class Tracker:
 
     def run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
         """Track ``source``; ``calibration`` None estimates the focal length (``--calib auto``)."""
-        before = torch.get_num_threads()
-        torch.set_num_threads(torch_threads(self.cfg.threads))
-        try:
+        with torch_threads_set(torch_threads(self.cfg.threads)):
             return self._run(source, calibration)
-        finally:
-            torch.set_num_threads(before)
 
     def _run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
         cfg, timer = self.cfg, self.timer
@@ -243,7 +231,7 @@ class Tracker:
             fe.early = scout
         filler = TrajectoryFiller(fe, cfg.filler)
         fe.on_remove = filler.keyframe_removed
-        gba = GlobalBackend(fe, cfg.backend)
+        gba = GlobalBackend(fe, cfg.backend, torch_threads(cfg.threads, alone=True))
         frames: list[tuple[int, float]] = []
 
         with warnings.catch_warnings(record=True) as caught:
@@ -288,15 +276,15 @@ class Tracker:
                     f"--calib auto: the camera never rotated {cfg.calib.min_rotation:g}° within a window, so the "
                     f"focal length was not estimated; it stays at the initial guess of {cfg.calib.focal_init:g} × "
                     f"the image's larger side (pass a calibration file for accurate results)")
-            with timer("global_ba"):
-                gba.finish()
-            self.backend.release()  # the last BA has run: its cached window features are dead weight
-            with timer("dynamics"):
-                dyn = _dynamic_record(fe, preparer)
-
-            unc = fe.uncertainty()
-            with timer("filler"):
-                poses_w2c = filler.finish()
+            with torch_threads_set(gba.threads):  # the workers are done: every usable core (slam/threads.py)
+                with timer("global_ba"):
+                    gba.finish()
+                self.backend.release()  # the last BA has run: its cached window features are dead weight
+                with timer("dynamics"):
+                    dyn = _dynamic_record(fe, preparer)
+                unc = fe.uncertainty()
+                with timer("filler"):
+                    poses_w2c = filler.finish()
             collected += [str(w.message) for w in caught if not issubclass(w.category, DeprecationWarning)]
 
         ident = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
