@@ -1,9 +1,11 @@
-"""The bounded global backend: loop (proximity) edges on a revisit, the horizon, stored keyframe images."""
+"""The bounded global backend: loop (proximity) edges on a revisit, the horizon, stored keyframe images; the
+frontend's proximity pairs under fast motion."""
 
 from __future__ import annotations
 
 import numpy as np
 import pypose as pp
+import pytest
 import torch
 
 from droidw_cli.ba.registry import get_backend
@@ -151,3 +153,24 @@ def test_torch_threads_leave_a_core_to_the_workers_except_when_alone(monkeypatch
     except RuntimeError:
         pass
     assert torch.get_num_threads() == before
+
+
+def _still_frontend(n: int, spacing: int, sets=()):
+    """n keyframes ``spacing`` frames apart, 1 cm apart in x: every pair is well under the proximity threshold."""
+    cfg = load_config("default", ["uncertainty.enable=false", *sets])
+    fe = Frontend(cfg, cfg.ba, get_backend("cpu"), _NoMatch(), GRID, K8, 0)
+    image = np.full((GRID[0] * 8, GRID[1] * 8, 3), 128, np.uint8)
+    for k in range(n):
+        fe.buffer.append(k * spacing, k * spacing / 30.0, torch.tensor([-0.01 * k, 0, 0, 0, 0, 0, 1.0]), 1.0 / 3.0,
+                         image[::8, ::8])
+    fe.initialised = True
+    return fe
+
+
+@pytest.mark.parametrize("spacing, pairs", [(2, 1), (3, 1), (4, 3), (9, 3)])
+def test_a_keyframe_close_behind_its_predecessor_brings_one_proximity_pair(spacing, pairs):
+    """frontend.proximity_gap (4 frames): fast motion brings keyframes every few frames, each with one pair."""
+    fe = _still_frontend(20, spacing)
+    got = fe._proximity(19, 0)
+    assert len(got) == 2 * pairs and all((j, i) in got for i, j in got)
+    assert len(_still_frontend(20, spacing, ["frontend.proximity_gap=0"])._proximity(19, 0)) == 6  # the old rule

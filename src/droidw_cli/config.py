@@ -131,9 +131,10 @@ class FrontendConfig:
     below this (the camera slowed down or stopped), unless that would leave more than ``removal_max_span``
     frames between keyframes (the filler's motion-only BA loses accuracy over long gaps of slow but steady
     motion).  ``flow_thresh`` and ``nms``: proximity edges of the newest keyframes; ``proximity_max`` bounds how
-    many new pairs one keyframe brings.  ``max_age``: an edge leaves the window BA after this many BA
-    iterations.  ``robust_sigma`` > 0: every window BA step weights each correspondence by the Cauchy factor 1 /
-    (1 + r²/σ²) of its current residual r (grid px), see :func:`droidw_cli.slam.optimizer.robust_edges`.
+    many new pairs one keyframe brings (one when it came under ``proximity_gap`` frames after the last).
+    ``max_age``: an edge leaves the window BA after this many BA iterations.  ``robust_sigma`` > 0: every window
+    BA step weights each correspondence by the Cauchy factor 1 / (1 + r²/σ²) of its current residual r (grid
+    px), see :func:`droidw_cli.slam.optimizer.robust_edges`.
     """
 
     warmup: int = 12
@@ -150,6 +151,7 @@ class FrontendConfig:
     removal_max_span: int = 12  # frames: no removal that would leave a longer gap between keyframes (600-frame walks, 3 seeds: mean ATE 0.85 cm at 12, 1.04 at 18)
     nms: int = 1
     proximity_max: int = 3
+    proximity_gap: int = 4  # frames: a keyframe closer than this to its predecessor brings one proximity pair
     max_age: int = 50
     # frame distance d = beta · full motion + (1 − beta) · translation only (keyframe removal, proximity edges).
     # DROID-W's 0.75 counts a rotation almost fully, so a fast-rotating camera keeps its keyframes: 0.5
@@ -179,7 +181,8 @@ class FrontendConfig:
         for name, value in counts.items():
             if value < 1:
                 raise ValueError(f"frontend.{name} must be >= 1, got {value}")
-        for name in ("iters2", "nms", "proximity_max", "keyframe_thresh", "init_parallax", "window_span"):
+        for name in ("iters2", "nms", "proximity_max", "proximity_gap", "keyframe_thresh", "init_parallax",
+                     "window_span"):
             if getattr(self, name) < 0:
                 raise ValueError(f"frontend.{name} must be >= 0, got {getattr(self, name)}")
         if not self.flow_thresh > 0:

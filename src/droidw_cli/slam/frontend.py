@@ -351,7 +351,10 @@ class Frontend:
         self.initialised = True
 
     def _proximity(self, k: int, lo: int) -> list[tuple[int, int]]:
-        """Proximity pairs of the newest keyframes within the window (DROID's frontend rule)."""
+        """Proximity pairs of the newest keyframes within the window (DROID's frontend rule): at most
+        ``proximity_max``, or one when keyframe k came under ``proximity_gap`` frames after its predecessor.
+        Under fast motion keyframes come every few frames, and their neighbours' pairs already tie that
+        stretch of the path to the window (docs/benchmarks.md, "One proximity pair under fast motion")."""
         f = self.fcfg
         cand = [(i, j) for i in range(max(lo, k - PROXIMITY_RECENT + 1), k + 1)
                 for j in range(lo, i - f.radius) if (i, j) not in self.cache]
@@ -359,7 +362,9 @@ class Frontend:
             return []
         dist = self.distance([i for i, _ in cand], [j for _, j in cand], f.proximity_stride)
         existing = {p for p in self.cache.pairs() if min(p) >= lo}
-        return graph.select_proximity(cand, dist, f.flow_thresh, f.nms, existing, f.proximity_max)
+        gap = self.buffer.frame_index[k] - self.buffer.frame_index[k - 1] if k >= 1 else f.proximity_gap
+        limit = f.proximity_max if gap >= f.proximity_gap else min(1, f.proximity_max)
+        return graph.select_proximity(cand, dist, f.flow_thresh, f.nms, existing, limit)
 
     def _update(self, k: int) -> int:
         """Window BA for the new keyframe k; returns its index after a possible removal."""
