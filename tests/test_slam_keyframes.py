@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -10,7 +11,8 @@ from droidw_cli.config import MotionFilterConfig
 from droidw_cli.slam import graph
 from droidw_cli.slam.distance import frame_distance, transfer_disparity
 from droidw_cli.slam.keyframes import GROW_MIN, KeyframeBuffer, grown_capacity
-from droidw_cli.slam.motion_filter import MotionFilter
+from droidw_cli.slam import motion_filter
+from droidw_cli.slam.motion_filter import MotionFilter, grey_small, motion_evidence
 from droidw_cli.slam.parallax import homography_parallax
 
 K8 = torch.tensor([50.0, 50.0, 31.5, 23.5])  # 1/8-grid intrinsics of a 384×512 working image
@@ -53,8 +55,6 @@ def test_transfer_disparity_of_a_forward_move_grows_the_disparity():
 def _textured(h=384, w=512, seed=0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     small = rng.integers(0, 255, (h // 8, w // 8), dtype=np.uint8)
-    import cv2
-
     grey = cv2.GaussianBlur(cv2.resize(small, (w + 64, h + 64), interpolation=cv2.INTER_CUBIC), (5, 5), 1.0)
     return np.repeat(grey[..., None], 3, axis=2)
 
@@ -207,3 +207,40 @@ def test_capacity_grows_by_a_quarter_and_keeps_every_value():
     # the rows past the count hold the fill values: identity pose, disparity 1, no prior
     assert torch.equal(buf.poses[n:], torch.tensor([0, 0, 0, 0, 0, 0, 1.0]).expand(buf.capacity - n, 7))
     assert bool((buf.disps[n:] == 1.0).all()) and bool((buf.depth_prior[n:] == 0.0).all())
+
+
+def _flat_wall_beside_a_mover(shift: int) -> np.ndarray:
+    """A fixed camera: a flat grey wall (sensor noise only) and a textured mover over 45 % of the width that has
+    moved ``shift`` px since the first frame (working size 384 × 512)."""
+    rng = np.random.default_rng(shift)
+    tex = cv2.GaussianBlur(np.random.default_rng(0).uniform(0, 255, (384, 512)).astype(np.float32), (0, 0), 2.0)
+    img = np.full((384, 512), 128.0, np.float32) + rng.normal(0, 1.5, (384, 512))
+    img[:, 40 + shift:270 + shift] = (tex[:, :230] - tex.mean()) * 4 + 128
+    return cv2.cvtColor(np.clip(img, 0, 255).astype(np.uint8), cv2.COLOR_GRAY2RGB)
+
+
+def test_motion_evidence_is_where_the_flow_explains_the_change():
+    """Flow on a textured shift is evidenced; flow claimed on a flat wall or on a static texture is not."""
+    grey = cv2.cvtColor(_textured()[:192, :256], cv2.COLOR_RGB2GRAY)
+    moved = np.ascontiguousarray(np.roll(grey, 4, axis=1))
+    flow = np.zeros((192, 256, 2), np.float32)
+    flow[..., 0] = 4.0
+    assert motion_evidence(grey, moved, flow)[:, 16:-16].mean() > 0.95  # the true flow of a shifted texture
+    assert not motion_evidence(grey, grey, flow).any()  # a static texture given a wrong flow
+    flat = np.full((192, 256), 128, np.uint8)
+    noisy = np.clip(128 + np.random.default_rng(1).normal(0, 1.5, flat.shape), 0, 255).astype(np.uint8)
+    assert not motion_evidence(flat, noisy, flow).any()  # a flat wall: no flow is told from another
+
+
+def test_a_flat_wall_that_the_flow_drags_along_with_a_mover_makes_no_keyframe():
+    """DIS drags the mover's motion over the flat wall beside it: its lower quartile passes 0.5 grid px, but the
+    images confirm the motion on too few pixels (motion_filter.EVIDENCE_MIN)."""
+    ref, later = _flat_wall_beside_a_mover(0), _flat_wall_beside_a_mover(8)
+    assert MotionFilter(MotionFilterConfig()).flow_stats(grey_small(ref), grey_small(later), quartile=True).quartile > 0.5
+    for floor, expected in ((motion_filter.EVIDENCE_MIN, False), (0.0, True)):
+        mf = MotionFilter(MotionFilterConfig(max_gap=5))
+        mf.check(ref, False)
+        mf.accept(ref)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(motion_filter, "EVIDENCE_MIN", floor)
+            assert [mf.check(later.copy(), False)[0] for _ in range(6)] == [False] * 4 + [expected] * 2

@@ -7,7 +7,11 @@ so a fixed camera watching movers (whose pixels are a minority) never produces
 a map from people walking by; after ``max_gap`` frames it is enough that the
 lower quartile of the flow reaches ``init_min_quartile`` grid px: three
 quarters of the image moved, which a near-still camera that wobbles does and
-a fixed camera does not, however close its movers come.
+a fixed camera does not, however close its movers come.  Either way the
+median of the flow where the images confirm it (:func:`motion_evidence`)
+must reach ``EVIDENCE_MIN``: DIS spreads close movers' motion over a
+textureless wall beside them, which then "moves" with them (the fixed preset's
+seeds 2 and 4 built a map out of three walkers without this).
 
 The flow here is a cheap DIS FAST estimate on a half-size grey image (ULTRAFAST
 at 1/4 size reads 1-5 px of spurious mean flow on a fixed camera watching
@@ -28,12 +32,37 @@ from droidw_cli.correspondence.dis import calc_deep, dis_objects, level_at
 from droidw_cli.geometry.camera import BA_SCALE
 
 _SCALE = 2  # the filter's flow runs at 1/2 of the working resolution
+#: motion evidence (before initialisation): the window (half-size px) and how much of the no-motion error,
+#: in grey levels, the flow must explain
+EVIDENCE_BLOCK = 8
+EVIDENCE_LEVELS = 2.0
+#: grid px: before initialisation a candidate also needs this median of the evidenced flow
+EVIDENCE_MIN = 0.25
 
 
 def grey_small(image: np.ndarray) -> np.ndarray:
     """RGB uint8 (H, W, 3) → grey uint8 at 1/_SCALE size (area averaging)."""
     grey = cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
     return cv2.resize(grey, (grey.shape[1] // _SCALE, grey.shape[0] // _SCALE), interpolation=cv2.INTER_AREA)
+
+
+def motion_evidence(grey_a: np.ndarray, grey_b: np.ndarray, flow: np.ndarray, block: int = EVIDENCE_BLOCK) -> np.ndarray:
+    """(h, w) bool: where the flow a → b explains image b better than no motion, per ``block`` × ``block`` window.
+
+    With e_flow = mean |b(x + f(x)) − a(x)| and e_zero = mean |b(x) − a(x)| over the window, the flow is
+    evidenced where e_zero − e_flow > ``EVIDENCE_LEVELS`` grey levels.  A textureless wall reads the same
+    whatever the flow claims (DIS fills it in from the movers beside it: on the fixed preset, seed 2, a cloudy
+    wall "moved" 2-4 grid px with three walkers close in front), and a static textured patch given a wrong flow
+    is explained better by no motion; only pixels whose change the flow accounts for count as moving.
+    """
+    h, w = grey_a.shape
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    a = grey_a.astype(np.float32)
+    warped = cv2.remap(grey_b, gx + flow[..., 0], gy + flow[..., 1], cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+    e_flow = cv2.blur(cv2.absdiff(warped, a), (block, block))
+    e_zero = cv2.blur(cv2.absdiff(grey_b.astype(np.float32), a), (block, block))
+    return e_zero - e_flow > EVIDENCE_LEVELS
 
 
 @dataclass(frozen=True)
@@ -43,6 +72,7 @@ class FlowStats:
     mean: float
     median: float
     quartile: float = float("nan")  # the lower quartile, when asked for
+    evidenced: float = float("nan")  # the median where the flow is evidenced (motion_evidence), when asked for
 
 
 class MotionFilter:
@@ -56,13 +86,17 @@ class MotionFilter:
         self._checked: tuple[np.ndarray, np.ndarray] | None = None  # (image, its small grey) of the last check
         self._since = 0
 
-    def flow_stats(self, grey_a: np.ndarray, grey_b: np.ndarray, quartile: bool = False) -> FlowStats:
+    def flow_stats(self, grey_a: np.ndarray, grey_b: np.ndarray, quartile: bool = False,
+                   evidenced: bool = False) -> FlowStats:
+        """Flow statistics a → b; ``evidenced``: also the median of the flow counted only where it explains
+        b better than standing still does (:func:`motion_evidence`), zero elsewhere."""
         flow = calc_deep(self._dis, grey_a, grey_b, None, self._level)
         mag = cv2.magnitude(flow[..., 0], flow[..., 1]) * (_SCALE / BA_SCALE)  # np.linalg.norm: 15× slower
+        shown = float(np.median(np.where(motion_evidence(grey_a, grey_b, flow), mag, 0.0))) if evidenced else float("nan")
         if not quartile:
-            return FlowStats(float(mag.mean()), float(np.median(mag)))
+            return FlowStats(float(mag.mean()), float(np.median(mag)), evidenced=shown)
         low, median = np.percentile(mag, [25, 50])
-        return FlowStats(float(mag.mean()), float(median), float(low))
+        return FlowStats(float(mag.mean()), float(median), float(low), shown)
 
     def check(self, image: np.ndarray, initialised: bool) -> tuple[bool, FlowStats]:
         """Is this frame a keyframe candidate?  The first frame always is."""
@@ -73,11 +107,13 @@ class MotionFilter:
         self._since += 1
         floor = self.cfg.init_min_quartile
         waited = not initialised and floor > 0 and self._since >= self.cfg.max_gap
-        stats = self.flow_stats(self._last, grey, quartile=waited)
+        stats = self.flow_stats(self._last, grey, quartile=waited, evidenced=not initialised)
         if initialised:
             ok = stats.mean >= self.cfg.thresh or self._since >= self.cfg.max_gap
         else:
-            ok = stats.median >= self.cfg.thresh or (waited and stats.quartile >= floor)
+            # and some of the motion must show in the images, not only in the flow (motion_evidence)
+            ok = ((stats.median >= self.cfg.thresh or (waited and stats.quartile >= floor))
+                  and stats.evidenced >= EVIDENCE_MIN)
         return ok, stats
 
     def accept(self, image: np.ndarray) -> None:
