@@ -181,8 +181,7 @@ class FrontendConfig:
         for name, value in counts.items():
             if value < 1:
                 raise ValueError(f"frontend.{name} must be >= 1, got {value}")
-        for name in ("iters2", "nms", "proximity_max", "proximity_gap", "keyframe_thresh", "init_parallax",
-                     "window_span"):
+        for name in ("iters2", "nms", "proximity_max", "proximity_gap", "keyframe_thresh", "init_parallax", "window_span"):
             if getattr(self, name) < 0:
                 raise ValueError(f"frontend.{name} must be >= 0, got {getattr(self, name)}")
         if not self.flow_thresh > 0:

@@ -10,7 +10,6 @@ the ``droidw.correspondence`` entry-point group).
 
 from __future__ import annotations
 
-import os
 import threading
 from abc import ABC, abstractmethod
 from concurrent.futures import ThreadPoolExecutor, wait
@@ -22,6 +21,7 @@ import torch
 
 from droidw_cli.correspondence.confidence import invert_flow
 from droidw_cli.correspondence.grid import validate_image
+from droidw_cli.slam.threads import usable_cores
 
 
 @dataclass(frozen=True)
@@ -54,10 +54,6 @@ class MatchCall:
     image_j: np.ndarray
     init_flow: np.ndarray | None = None
     both: bool = False
-
-
-def _usable_cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 class CorrespondenceSource(ABC):
@@ -167,7 +163,7 @@ class CorrespondenceSource(ABC):
         (each job depends on its inputs only).  The first error is raised once
         every job has finished or been skipped.
         """
-        workers = min(len(jobs), _usable_cores())
+        workers = min(len(jobs), usable_cores())
         if serial or not self.concurrent_match or workers < 2:
             return [job() for job in jobs]
         size, pool = getattr(self, "_match_pool", (0, None))
