@@ -56,6 +56,28 @@ def test_feature_block_converts_without_changing_values():
     assert block.dtype == torch.float32 and torch.equal(block, fe.buffer.feature_block(1, 4).float())
 
 
+def test_channels_last_blocks_reuse_the_last_windows_rows_and_keep_their_values(monkeypatch):
+    """feature_block keeps a window's float32 channels-last rows for the next window (keyframes/ROWS_CACHED)."""
+    import droidw_cli.slam.keyframes as keyframes_mod
+
+    fe = _frontend_with_features(9)
+    buf = fe.buffer
+
+    def reference(lo, hi):  # the stored features, converted and laid out channels-last afresh
+        return torch.stack([f.float() for f in buf.features[lo:hi]]).contiguous(memory_format=torch.channels_last)
+
+    first = buf.feature_block(1, 5, torch.float32, channels_last=True)
+    assert first.is_contiguous(memory_format=torch.channels_last) and torch.equal(first, reference(1, 5))
+    assert buf.feature_block(1, 5, torch.float32, channels_last=True) is first  # the same keyframes: the same block
+    moved = buf.feature_block(2, 7, torch.float32, channels_last=True)  # the next window: rows 2-4 from the cache
+    assert moved is not first and torch.equal(moved, reference(2, 7))
+    buf.remove(4)  # keyframe removal renumbers: the cache follows the features, not their index
+    assert torch.equal(buf.feature_block(2, 7, torch.float32, channels_last=True), reference(2, 7))
+    monkeypatch.setattr(keyframes_mod, "ROWS_CACHED", 3)
+    big = buf.feature_block(0, 8, torch.float32, channels_last=True)  # a global BA's block: not kept
+    assert torch.equal(big, reference(0, 8)) and buf.feature_block(0, 8, torch.float32, channels_last=True) is not big
+
+
 def test_thumbnails_stay_encoded_and_decode_to_the_same_images():
     from droidw_cli.slam.keyframes import KeyframeBuffer
 
