@@ -22,6 +22,7 @@ pedestrians).  With ``correspondence.coarsest_scale`` k > 0 its pyramid reaches
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import cv2
@@ -75,6 +76,13 @@ class FlowStats:
     evidenced: float = float("nan")  # the median where the flow is evidenced (motion_evidence), when asked for
 
 
+def _with_evidence(stats: FlowStats, grey_a: np.ndarray, grey_b: np.ndarray, flow: np.ndarray,
+                   mag: np.ndarray) -> FlowStats:
+    """``stats`` with the median of the flow magnitude ``mag`` where :func:`motion_evidence` holds (zero elsewhere)."""
+    shown = float(np.median(np.where(motion_evidence(grey_a, grey_b, flow), mag, 0.0)))
+    return dataclasses.replace(stats, evidenced=shown)
+
+
 class MotionFilter:
     """Decides keyframe candidates from flow to the last keyframe."""
 
@@ -90,13 +98,17 @@ class MotionFilter:
                    evidenced: bool = False) -> FlowStats:
         """Flow statistics a → b; ``evidenced``: also the median of the flow counted only where it explains
         b better than standing still does (:func:`motion_evidence`), zero elsewhere."""
+        stats, flow, mag = self._flow(grey_a, grey_b, quartile)
+        return _with_evidence(stats, grey_a, grey_b, flow, mag) if evidenced else stats
+
+    def _flow(self, grey_a: np.ndarray, grey_b: np.ndarray, quartile: bool) -> tuple[FlowStats, np.ndarray, np.ndarray]:
+        """(statistics without the evidence, the flow a → b, its magnitude in grid px)."""
         flow = calc_deep(self._dis, grey_a, grey_b, None, self._level)
         mag = cv2.magnitude(flow[..., 0], flow[..., 1]) * (_SCALE / BA_SCALE)  # np.linalg.norm: 15× slower
-        shown = float(np.median(np.where(motion_evidence(grey_a, grey_b, flow), mag, 0.0))) if evidenced else float("nan")
         if not quartile:
-            return FlowStats(float(mag.mean()), float(np.median(mag)), evidenced=shown)
+            return FlowStats(float(mag.mean()), float(np.median(mag))), flow, mag
         low, median = np.percentile(mag, [25, 50])
-        return FlowStats(float(mag.mean()), float(median), float(low), shown)
+        return FlowStats(float(mag.mean()), float(median), float(low)), flow, mag
 
     def check(self, image: np.ndarray, initialised: bool) -> tuple[bool, FlowStats]:
         """Is this frame a keyframe candidate?  The first frame always is."""
@@ -107,13 +119,14 @@ class MotionFilter:
         self._since += 1
         floor = self.cfg.init_min_quartile
         waited = not initialised and floor > 0 and self._since >= self.cfg.max_gap
-        stats = self.flow_stats(self._last, grey, quartile=waited, evidenced=not initialised)
+        stats, flow, mag = self._flow(self._last, grey, quartile=waited)
         if initialised:
             ok = stats.mean >= self.cfg.thresh or self._since >= self.cfg.max_gap
         else:
-            # and some of the motion must show in the images, not only in the flow (motion_evidence)
-            ok = ((stats.median >= self.cfg.thresh or (waited and stats.quartile >= floor))
-                  and stats.evidenced >= EVIDENCE_MIN)
+            ok = stats.median >= self.cfg.thresh or (waited and stats.quartile >= floor)
+            if ok:  # and some of the motion must show in the images, not only in the flow (motion_evidence)
+                stats = _with_evidence(stats, self._last, grey, flow, mag)
+                ok = stats.evidenced >= EVIDENCE_MIN
         return ok, stats
 
     def accept(self, image: np.ndarray) -> None:
