@@ -6,7 +6,8 @@ Streams a synthetic preset (as ``track_bench.py --memory-minutes`` does) and,
 every ``--every`` new keyframes, prints the resident set size (RSS; with
 ``--trim`` also RSS after ``malloc_trim``, what the heap could hand back: the
 rest is live or fragmented; trimming changes the later peaks), the peak RSS
-so far, and the bytes held by each long-lived
+so far, malloc's own count (``mallinfo2``: MB in live heap blocks, in free heap
+chunks, in blocks mapped on their own), and the bytes held by each long-lived
 structure of the run: the keyframe buffer, the frontend's images, edge cache
 and dynamic masks, the backend's JPEG images and the filler's per-frame
 records.  At the end it prints the same after the final global BA and after
@@ -17,6 +18,7 @@ to tracemalloc, hence the explicit accounting.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import resource
 import sys
 import time
@@ -36,6 +38,25 @@ def rss_mb(trim: bool = False) -> float:
         release_free_memory()
     with open("/proc/self/statm") as f:
         return int(f.read().split()[1]) * resource.getpagesize() / 2**20
+
+
+class _MallInfo2(ctypes.Structure):
+    """glibc's ``struct mallinfo2`` (glibc 2.33+), summed over every arena."""
+
+    _fields_ = [(name, ctypes.c_size_t) for name in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks",
+                 "keepcost")]
+
+
+def heap_mb() -> str:
+    """malloc's view as 'in use/free/mapped' MB: live heap blocks, free heap bytes (holes), mmapped blocks."""
+    try:
+        fn = ctypes.CDLL("libc.so.6").mallinfo2
+    except (OSError, AttributeError):
+        return "-"
+    fn.restype = _MallInfo2
+    m = fn()
+    return f"{m.uordblks / 2**20:.0f}/{m.fordblks / 2**20:.0f}/{m.hblkhd / 2**20:.0f}"
 
 
 def peak_mb() -> float:
@@ -114,11 +135,12 @@ def main() -> None:
         acc = account(fe, gba, filler)
         if not keys:
             keys.extend(acc)
-            print("tag kf frames_filled rss trimmed peak " + " ".join(keys) + " total (all MB)", flush=True)
+            print("tag kf frames_filled rss trimmed peak heap(used/free/mapped) " + " ".join(keys) + " total (all MB)",
+                  flush=True)
         tot = sum(acc.values())
         cells = " ".join(f"{v / 2**20:.1f}" for v in acc.values())
         trimmed = f"{rss_mb(True):.0f}" if args.trim else "-"
-        print(f"{tag} {len(fe.buffer)} {len(filler._relative)} {rss_mb():.0f} {trimmed} {peak_mb():.0f} "
+        print(f"{tag} {len(fe.buffer)} {len(filler._relative)} {rss_mb():.0f} {trimmed} {peak_mb():.0f} {heap_mb()} "
               f"{cells} {tot / 2**20:.1f}  [{time.perf_counter() - seen['t0']:.0f} s]", flush=True)
 
     original_gba = tracker_mod.GlobalBackend
@@ -142,7 +164,8 @@ def main() -> None:
                 if value > seen.get("max", 0.0):
                     seen["max"] = value
                     print(f"new peak {value:.0f} MB in {what} at keyframe {len(self.fe.buffer)} "
-                          f"(edges {edges_before} -> {len(self.fe.cache)}, problem from {self.lo})", flush=True)
+                          f"(edges {edges_before} -> {len(self.fe.cache)}, problem from {self.lo}; after it rss "
+                          f"{rss_mb():.0f} MB, heap {heap_mb()})", flush=True)
             return out
 
         def finish(self):
