@@ -1,8 +1,9 @@
-"""The heap's free pages go back to the OS before each global BA, and its large blocks are mapped (slam/heap.py)."""
+"""The heap's free pages go back to the OS around each global BA, its large blocks are mapped, its arenas capped (slam/heap.py)."""
 
 from __future__ import annotations
 
 import ctypes.util
+import os
 import subprocess
 import sys
 
@@ -65,3 +66,41 @@ def test_large_blocks_are_mapped_only_inside_the_block():
     """Inside, a 12 MB block gets a mapping of its own; after it, the heap takes such a block (threshold 32 MB)."""
     out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, check=True).stdout.split()
     assert out == ["True", "True", "False"]
+
+
+#: six threads that each allocate: glibc gives each a new arena of its own up to the cap
+_ARENAS = """
+import ctypes, sys, threading
+from droidw_cli.slam.heap import limit_arenas
+
+applied = limit_arenas(2) if sys.argv[1] == "cap" else None
+barrier = threading.Barrier(6)
+held = []
+
+def work():
+    held.append(bytearray(200_000))
+    barrier.wait()
+
+threads = [threading.Thread(target=work) for _ in range(6)]
+for t in threads:
+    t.start()
+for t in threads:
+    t.join()
+sys.stderr.flush()
+ctypes.CDLL("libc.so.6").malloc_stats()  # one "Arena N:" block per arena, on stderr
+print(applied)
+"""
+
+
+def _arenas(mode: str, env: dict | None = None) -> tuple[str, int]:
+    proc = subprocess.run([sys.executable, "-c", _ARENAS, mode], capture_output=True, text=True, check=True, env=env)
+    return proc.stdout.strip(), proc.stderr.count("Arena ")
+
+
+@glibc
+def test_arenas_are_capped_at_two():
+    """Uncapped, six allocating threads make more than two arenas; capped, two; MALLOC_ARENA_MAX wins."""
+    assert _arenas("free")[1] > 2
+    assert _arenas("cap") == ("True", 2)
+    applied, count = _arenas("cap", {**os.environ, "MALLOC_ARENA_MAX": "3"})
+    assert applied == "False" and count <= 3

@@ -19,8 +19,8 @@ iterations), and once at the end (``iters``).
 
 The images of the keyframes in the problem are kept JPEG-encoded at the
 working resolution (``image_quality``), about a tenth of their raw size, and
-each run first hands the heap's free pages back and maps its large temporaries
-on their own (:mod:`droidw_cli.slam.heap`).
+each run hands the heap's free pages back before and after it and maps its large
+temporaries on their own (:mod:`droidw_cli.slam.heap`).
 """
 
 from __future__ import annotations
@@ -122,7 +122,9 @@ class GlobalBackend:
     def run(self, iters: int) -> float:
         """One bounded global BA over [lo, n) with new proximity edges; returns the final cost."""
         with large_blocks_mapped():
-            return self._run(iters)
+            cost = self._run(iters)
+        release_free_memory()  # the run's temporaries go back now, not at the next run (heap.py)
+        return cost
 
     def _run(self, iters: int) -> float:
         fe = self.fe

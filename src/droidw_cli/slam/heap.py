@@ -11,20 +11,31 @@ free page (the top of each arena and whole free pages inside it), so each run
 starts from what is live.
 
 Inside a run, :func:`large_blocks_mapped` lowers glibc's mmap threshold
-(``M_MMAP_THRESHOLD``) to 16 MB: the run's per-edge (E, HW) temporaries (22 MB
+(``M_MMAP_THRESHOLD``) to 4 MB: the run's per-edge (E, HW) temporaries (22 MB
 at 1800 edges on the 48 × 64 grid), whose size follows the edge count, no
 longer extend the heap where no free chunk holds them (glibc consults the
 threshold only then) but get mappings of their own, which go back to the
 system when freed instead of leaving holes.  Smaller blocks stay on the heap: a 1 MB threshold made the
-global BA 30-60 % slower (page faults on every temporary), 16 MB costs nothing
-measurable.  After the run the threshold returns to 32 MB, the ceiling of
-glibc's own dynamic threshold.  Elsewhere (musl, macOS, Windows) both do nothing.
+global BA 30-60 % slower (page faults on every temporary).  After the run the
+free pages are handed back again and the threshold returns to 32 MB, the
+ceiling of glibc's own dynamic threshold.
+
+:func:`limit_arenas` caps glibc's arenas at two (``M_ARENA_MAX``; by default
+glibc allows 8 per core): the threads that allocate beside the main one (the
+prefetch and scout, the match pool, the filler's flow worker, torch's workers)
+share one arena instead of each fragmenting its own.
+
+These three together (4 MB inside runs, a trim after each run, two arenas)
+took the peak of a 10-minute stream from 1762 to 1521 MB with the same
+trajectory (``docs/benchmarks.md``, "Memory: two arenas"); one pair of runs,
+not separated.  Elsewhere (musl, macOS, Windows) all of this does nothing.
 """
 
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -33,7 +44,11 @@ from functools import cache
 #: mallopt's parameter number of the mmap threshold (glibc malloc.h)
 M_MMAP_THRESHOLD = -3
 #: blocks of at least this many bytes are mapped on their own during a global BA run
-RUN_MMAP_THRESHOLD = 16 * 2**20
+RUN_MMAP_THRESHOLD = 4 * 2**20
+#: mallopt's parameter number of the arena cap (glibc malloc.h)
+M_ARENA_MAX = -8
+#: arenas allowed: the main thread's and one that every other thread shares
+ARENAS = 2
 #: glibc's ceiling for its dynamic mmap threshold on 64-bit (DEFAULT_MMAP_THRESHOLD_MAX)
 DYNAMIC_MMAP_CEILING = 32 * 2**20
 
@@ -59,6 +74,18 @@ def _malloc_trim():
 
 def _mallopt():
     return _glibc("mallopt", (ctypes.c_int, ctypes.c_int))
+
+
+def limit_arenas(n: int = ARENAS) -> bool:
+    """Cap glibc's arenas at ``n`` (unless ``MALLOC_ARENA_MAX`` is set); True when the cap took effect.
+
+    glibc honours the cap for threads that get their first arena afterwards, so call it before the
+    tracker starts its threads.
+    """
+    mallopt = _mallopt()
+    if mallopt is None or "MALLOC_ARENA_MAX" in os.environ:
+        return False
+    return bool(mallopt(M_ARENA_MAX, int(n)))
 
 
 def release_free_memory() -> bool:

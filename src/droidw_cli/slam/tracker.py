@@ -36,6 +36,7 @@ from droidw_cli.slam.backend import GlobalBackend
 from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.depth_prior import grid_disparity
 from droidw_cli.slam.frontend import Frontend
+from droidw_cli.slam.heap import limit_arenas
 from droidw_cli.slam.motion_filter import MotionFilter
 from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.scout import Scout
@@ -199,6 +200,7 @@ class Tracker:
 
     def run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
         """Track ``source``; ``calibration`` None estimates the focal length (``--calib auto``)."""
+        limit_arenas()  # before the run's threads take arenas of their own (slam/heap.py)
         with torch_threads_set(torch_threads(self.cfg.threads)):
             return self._run(source, calibration)
 
