@@ -92,7 +92,11 @@ print(applied)
 """
 
 
-def _arenas(mode: str, env: dict | None = None) -> tuple[str, int]:
+def _arenas(mode: str, arena_max: str | None = None) -> tuple[str, int]:
+    """(what limit_arenas returned, arenas made) in a fresh interpreter; MALLOC_ARENA_MAX only as given."""
+    env = {k: v for k, v in os.environ.items() if k != "MALLOC_ARENA_MAX"}
+    if arena_max is not None:
+        env["MALLOC_ARENA_MAX"] = arena_max
     proc = subprocess.run([sys.executable, "-c", _ARENAS, mode], capture_output=True, text=True, check=True, env=env)
     return proc.stdout.strip(), proc.stderr.count("Arena ")
 
@@ -102,5 +106,5 @@ def test_arenas_are_capped_at_two():
     """Uncapped, six allocating threads make more than two arenas; capped, two; MALLOC_ARENA_MAX wins."""
     assert _arenas("free")[1] > 2
     assert _arenas("cap") == ("True", 2)
-    applied, count = _arenas("cap", {**os.environ, "MALLOC_ARENA_MAX": "3"})
+    applied, count = _arenas("cap", arena_max="3")
     assert applied == "False" and count <= 3
