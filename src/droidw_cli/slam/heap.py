@@ -27,8 +27,8 @@ share one arena instead of each fragmenting its own.
 
 These three together (4 MB inside runs, a trim after each run, two arenas)
 took the peak of a 10-minute stream from 1762 to 1521 MB with the same
-trajectory (``docs/benchmarks.md``, "Memory: two arenas"); one pair of runs,
-not separated.  Elsewhere (musl, macOS, Windows) all of this does nothing.
+trajectory in one pair of runs, and read 1591 MB alone (``docs/benchmarks.md``,
+"Memory: two arenas"); the three were not measured apart.  Elsewhere (musl, macOS, Windows) all of this does nothing.
 """
 
 from __future__ import annotations
