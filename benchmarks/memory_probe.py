@@ -100,7 +100,7 @@ def account(fe, gba, filler) -> dict[str, int]:
         "buf.frozen_u+conf": nbytes([buf.frozen_u, buf.frozen_conf]),
         "buf.thumbnails": nbytes(buf.thumbnails),
         "fe.images": nbytes(fe.images),
-        "fe.cache": nbytes(fe.cache.targets),
+        "fe.cache": fe.cache.nbytes,
         "fe._raw+_epipolar": nbytes([fe._raw, fe._epipolar]),
         "masks": nbytes([m.images, m.masks, m.current]),
         "masks.edges": nbytes(getattr(m, "edges", None)),

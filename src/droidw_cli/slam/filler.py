@@ -356,7 +356,7 @@ class TrajectoryFiller:
         mine = [(i, j) for (i, j) in fe.cache.pairs() if i == k]
         if not mine:
             return torch.ones(buf.grid, device=buf.device)
-        conf = torch.stack([fe.cache.targets[p][1][..., 0].float() for p in mine]).mean(0)
+        conf = torch.stack([fe.cache.weight(p)[..., 0].float() for p in mine]).mean(0)
         unc = fe.params.uncertainty
         theta = fe.shared.theta
         if not (self.cfg.uncertainty and unc.enable and buf.features is not None and theta is not None):

@@ -246,7 +246,7 @@ class Frontend:
                 masked |= moving
             keep = torch.from_numpy(~masked).float()[..., None]
             for (a, b), w in mine:
-                self.cache.put(a, b, self.cache.targets[(a, b)][0], w * keep)
+                self.cache.put(a, b, self.cache.target((a, b)), w * keep)
 
     def _detect(self, frames: list[int]) -> None:
         """Scene-consistency masks of these keyframes under the current poses and depths, applied to BA."""
@@ -435,9 +435,9 @@ class Frontend:
         hi = len(buf) if hi is None else hi
         conf = torch.zeros(hi - lo, *buf.grid, device=buf.device)
         count = torch.zeros(hi - lo)
-        for (i, _), (_, w) in self.cache.targets.items():
+        for i, j in self.cache.pairs():
             if lo <= i < hi:
-                conf[i - lo] += w[..., 0].float()
+                conf[i - lo] += self.cache.weight((i, j))[..., 0].float()
                 count[i - lo] += 1
         conf /= count.clamp(min=1).to(conf.device)[:, None, None]
         for k, c in buf.frozen_conf.items():

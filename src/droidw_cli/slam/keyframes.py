@@ -8,6 +8,9 @@ Nothing at the working resolution is kept here.  The features are the bulk
 (64 × h × w float16, ~390 KB at 48 × 64): once a keyframe leaves the bounded
 global problem, :meth:`KeyframeBuffer.archive` replaces them by the frozen
 uncertainty map u_t (h × w float16); thumbnails are kept JPEG-encoded.
+The stored features are the rows of one :class:`~droidw_cli.slam.slab.RowSlab`
+(an archived keyframe's row is reused by a later keyframe), not tensors of
+their own, which left holes in the heap over a long video.
 
 The tensors live on ``device``, the BA backend's (:attr:`BABackend.device`),
 from the start: a keyframe's pose, disparity, features and prior are copied
@@ -31,6 +34,7 @@ import torch
 from torch import Tensor
 
 from droidw_cli.io.jpeg import JpegStack, decode_rgb, encode_rgb
+from droidw_cli.slam.slab import RowSlab
 
 #: JPEG quality of the stored thumbnails (37 KB raw at 96 × 128 → a few KB; a long video keeps thousands)
 THUMBNAIL_QUALITY = 95
@@ -63,6 +67,9 @@ class KeyframeBuffer:
         self.depth_prior: Tensor | None = None  # allocated with the first prior (RGB-D); monocular runs keep none
         self.feature_dtype = feature_dtype
         self.features: list | None = [] if feature_channels else None  # Tensor, pending, or None: archived
+        # the stored features are rows of one slab (slam/slab.py): the slab row of each keyframe's, or None
+        self._feature_slab = RowSlab((feature_dtype,), self.device, GROW_MIN) if feature_channels else None
+        self._feature_row: list[int | None] = []
         self.frozen_u: dict[int, Tensor] = {}  # archived keyframe → its uncertainty map (h, w) float16
         self.frozen_conf: dict[int, Tensor] = {}  # archived keyframe → its mean edge confidence (h, w) float16
         self.frame_index: list[int] = []
@@ -109,7 +116,10 @@ class KeyframeBuffer:
         if self.features is not None:
             if features is None:
                 raise ValueError("this buffer keeps features: every keyframe needs them")
-            self.features.append(self._stored(features) if isinstance(features, Tensor) else features)
+            self.features.append(features)
+            self._feature_row.append(None)
+            if isinstance(features, Tensor):
+                self._store_features(k, features)
         if depth_prior is not None:
             if self.depth_prior is None:
                 self.depth_prior = torch.zeros_like(self.disps)
@@ -128,7 +138,9 @@ class KeyframeBuffer:
             raise IndexError(f"keyframe {k} out of range [0, {self.count})")
         n = self.count
         if self.features is not None:
-            del self.features[k]
+            if self._feature_row[k] is not None:
+                self._feature_slab.release(self._feature_row[k])
+            del self.features[k], self._feature_row[k]
         self.frozen_u = {i - (i > k): u for i, u in self.frozen_u.items() if i != k}
         self.frozen_conf = {i - (i > k): c for i, c in self.frozen_conf.items() if i != k}
         for t in (self.poses, self.disps, self.depth_prior):
@@ -168,7 +180,7 @@ class KeyframeBuffer:
             raise ValueError(f"keyframes in [{lo}, {hi}) were archived: their features are gone")
         for k, f in enumerate(block):
             if not isinstance(f, Tensor):  # pending: fetch them once
-                block[k] = self.features[lo + k] = self._stored(f.result())
+                block[k] = self._store_features(lo + k, f.result())
         dtype = self.feature_dtype if dtype is None else dtype
         if not block or (dtype == self.feature_dtype and not channels_last):
             return torch.stack(block)
@@ -200,8 +212,18 @@ class KeyframeBuffer:
             self._rows, self._last_block = kept, (tuple(block), dtype, out)
         return out
 
-    def _stored(self, features: Tensor) -> Tensor:
-        return features.to(device=self.device, dtype=self.feature_dtype)
+    def _store_features(self, k: int, features: Tensor) -> Tensor:
+        """Keyframe k's features into a slab row (converted to the stored dtype); returns the row's view."""
+        slab = self._feature_slab
+        generation = slab.generation
+        self._feature_row[k] = slab.store(features)
+        if slab.generation != generation:  # the slab moved: point every stored keyframe at its new row
+            for i, row in enumerate(self._feature_row):
+                if row is not None and i != k:
+                    self.features[i] = slab.row(row)[0]
+            self._rows, self._last_block = {}, None
+        self.features[k] = slab.row(self._feature_row[k])[0]
+        return self.features[k]
 
     def archive(self, k: int, uncertainty: Tensor | None, confidence: Tensor) -> None:
         """Keyframe k left the optimisation for good: keep its u and confidence maps, drop its features."""
@@ -209,4 +231,6 @@ class KeyframeBuffer:
             self.frozen_u[k] = uncertainty.to(torch.float16)
         self.frozen_conf[k] = confidence.to(torch.float16)
         if self.features is not None:
-            self.features[k] = None
+            if self._feature_row[k] is not None:
+                self._feature_slab.release(self._feature_row[k])
+            self.features[k] = self._feature_row[k] = None
