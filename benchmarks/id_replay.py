@@ -18,7 +18,10 @@ overrides of its fields.  Per capture and in total: the worst walker's id switch
 (in brackets over all keyframes where it has an id), the share of walkers in view whose id another
 walker in view has too, and the number of ids, as ``dynamic_bench.py --modes`` counts them.  Column
 "same": the defaults gave the captured run's ids exactly (they do unless the object-id code changed since
-the capture; capture again then).
+the capture; capture again then).  Column "merged": the share of walkers in view (per keyframe) whose
+component of the labelled mask (split at depth steps as the tracker splits it where it has depth) also holds
+at least ``MERGED_SHARE`` of another walker in view: no association can give both their own id there; only
+a split of the component can (the limit that the masks set, not the tracker's parameters).
 """
 
 from __future__ import annotations
@@ -33,9 +36,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _bench_common import cached_sequence, print_table, run_case_subprocess, track_source  # noqa: E402
-from dynamic_bench import id_shared, id_switches, id_switches_any, instance_masks  # noqa: E402
+from dynamic_bench import IN_VIEW, id_shared, id_switches, id_switches_any, instance_masks  # noqa: E402
 
 STORE = Path(__file__).resolve().parent / ".cache" / "ids"
+#: a walker's component "holds" another walker when it covers this share of the other's mask
+MERGED_SHARE = 0.3
 INPUTS = {"rgbd": ("rgbd", "both"), "mono": ("default", "epipolar")}
 
 
@@ -97,6 +102,32 @@ def replay(capture: dict, overrides: dict[str, object]) -> tuple[int, int, float
             int(len(np.unique(ids[ids >= 0]))), ids)
 
 
+def merged_share(capture: dict, ids: np.ndarray) -> float:
+    """Share of the (walker, keyframe) pairs in view whose component also holds another walker in view
+    (column "merged" of the module docstring)."""
+    from droidw_cli.dynamics.association import depth_components
+    from droidw_cli.dynamics.tracker import DynamicObjectTracker
+
+    _, _, disps, _, _, sensor_depth = capture["inputs"]
+    truth = capture["truth"]
+    visible = truth.reshape(len(truth), len(ids), -1).mean(2) >= IN_VIEW
+    step = DynamicObjectTracker().depth_step
+    merged = total = 0
+    for k in range(len(ids)):
+        d = disps[k].numpy().astype(np.float64)
+        depth = np.where(d > 0, 1.0 / np.maximum(d, 1e-6), 0.0) if sensor_depth else None
+        labels = depth_components(ids[k] >= 0, depth, step)
+        for w in np.flatnonzero(visible[:, k]):
+            hit = labels[truth[w, k] & (labels > 0)]
+            if not hit.size:
+                continue
+            total += 1
+            comp = labels == np.bincount(hit).argmax()
+            merged += any((truth[o, k] & comp).sum() >= MERGED_SHARE * truth[o, k].sum()
+                          for o in np.flatnonzero(visible[:, k]) if o != w)
+    return merged / max(total, 1)
+
+
 def parse_overrides(items: list[str]) -> dict[str, object]:
     """``field=value`` pairs of :class:`DynamicObjectTracker` fields, converted to the field's type."""
     from droidw_cli.dynamics.tracker import DynamicObjectTracker
@@ -120,21 +151,24 @@ def replay_table(args: argparse.Namespace) -> None:
         paths = [p for p in paths if p.stem in set(args.only)]
     if not paths:
         raise SystemExit(f"no captures in {STORE}: run with --capture first")
-    rows, totals = [], np.zeros(4)
+    rows, totals, merged = [], np.zeros(4), []
     for path in paths:
         with open(path, "rb") as f:
             capture = pickle.load(f)
         base = replay(capture, {})
         new = replay(capture, overrides) if overrides else base
         same = bool(np.array_equal(base[4], capture["ids"]))
+        merged.append(merged_share(capture, base[4]))
         totals += [base[0], new[0], base[2], new[2]]
-        rows.append([path.stem, f"{base[0]} ({base[1]})", f"{100 * base[2]:.0f}", base[3], "yes" if same else "NO",
+        rows.append([path.stem, f"{base[0]} ({base[1]})", f"{100 * base[2]:.0f}", f"{100 * merged[-1]:.0f}", base[3],
+                     "yes" if same else "NO",
                      f"{new[0]} ({new[1]})", f"{100 * new[2]:.0f}", new[3]])
         print(" | ".join(str(c) for c in rows[-1]), file=sys.stderr, flush=True)
-    rows.append(["total / mean", f"{totals[0]:.0f}", f"{100 * totals[2] / len(paths):.1f}", "", "",
+    rows.append(["total / mean", f"{totals[0]:.0f}", f"{100 * totals[2] / len(paths):.1f}",
+                 f"{100 * np.mean(merged):.1f}", "", "",
                  f"{totals[1]:.0f}", f"{100 * totals[3] / len(paths):.1f}", ""])
     print(f"\nObject ids replayed, overrides: {overrides or 'none'}")
-    print_table(["capture", "switches (any)", "shared [%]", "ids", "same", "with overrides: switches (any)",
+    print_table(["capture", "switches (any)", "shared [%]", "merged [%]", "ids", "same", "with overrides: switches (any)",
                  "shared [%]", "ids"], rows)
 
 

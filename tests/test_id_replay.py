@@ -5,7 +5,9 @@ from __future__ import annotations
 import importlib.util
 from pathlib import Path
 
+import numpy as np
 import pytest
+import torch
 
 _BENCH = Path(__file__).resolve().parents[1] / "benchmarks"
 _spec = importlib.util.spec_from_file_location("id_replay", _BENCH / "id_replay.py")
@@ -23,3 +25,26 @@ def test_overrides_take_the_type_of_the_tracker_field():
 def test_unknown_fields_and_tracking_state_are_refused(item):
     with pytest.raises(SystemExit, match="expected FIELD=VALUE"):
         replay.parse_overrides([item])
+
+
+def _capture(disparity: torch.Tensor, sensor_depth: bool) -> tuple[dict, np.ndarray]:
+    """Two walkers side by side in one keyframe (columns 2-4 and 5-7), labelled as one object."""
+    truth = np.zeros((2, 1, 8, 10), dtype=bool)
+    truth[0, 0, 2:6, 2:5] = True
+    truth[1, 0, 2:6, 5:8] = True
+    ids = np.full((1, 8, 10), -1, dtype=np.int16)
+    ids[0][truth[:, 0].any(0)] = 0
+    return {"inputs": (None, None, disparity, None, None, sensor_depth), "truth": truth}, ids
+
+
+def test_merged_counts_walkers_that_share_a_component_unless_a_depth_step_splits_it():
+    near_far = torch.full((1, 8, 10), 0.5)
+    near_far[0, :, 5:] = 0.25  # the second walker twice as far: a depth step between them
+    capture, ids = _capture(near_far, sensor_depth=True)
+    assert replay.merged_share(capture, ids) == 0.0
+    capture, ids = _capture(near_far, sensor_depth=False)  # monocular: BA's depth is not used
+    assert replay.merged_share(capture, ids) == 1.0
+    capture, ids = _capture(torch.full((1, 8, 10), 0.5), sensor_depth=True)  # the same depth: one component
+    assert replay.merged_share(capture, ids) == 1.0
+    ids[0][:, 5:] = -1  # the second walker unlabelled: the first one's component holds nobody else
+    assert replay.merged_share(capture, ids) == 0.0
