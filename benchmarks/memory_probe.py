@@ -96,7 +96,7 @@ def account(fe, gba, filler) -> dict[str, int]:
     buf, m = fe.buffer, fe.masks
     return {
         "buf.poses+disps+prior": nbytes([buf.poses, buf.disps, buf.depth_prior]),
-        "buf.features": nbytes(buf.features),
+        "buf.features": buf._feature_slab.nbytes if buf._feature_slab is not None else 0,  # the slab, free rows too
         "buf.frozen_u+conf": nbytes([buf.frozen_u, buf.frozen_conf]),
         "buf.thumbnails": nbytes(buf.thumbnails),
         "fe.images": nbytes(fe.images),
