@@ -100,9 +100,7 @@ class RowSlab:
 
     def rows(self, rows: Sequence[int] | Tensor) -> tuple[Tensor, ...]:
         """Copies of the given rows, stacked, one tensor per field."""
-        idx = torch.as_tensor(rows, dtype=torch.long, device=self.device)
         if self.blocks is None:
-            if idx.numel():
-                raise IndexError("the slab is empty")
-            return tuple(torch.empty(0, dtype=d, device=self.device) for d in self.dtypes)
+            raise IndexError("the slab is empty")
+        idx = torch.as_tensor(rows, dtype=torch.long, device=self.device)
         return tuple(block.index_select(0, idx) for block in self.blocks)
