@@ -73,11 +73,14 @@ class EdgeCache:
 
     def _forget(self, keep) -> None:
         """Release the rows of the edges ``keep(p)`` rejects."""
+        kept = {}
         for p, row in self._row.items():
-            if not keep(p):
+            if keep(p):
+                kept[p] = row
+            else:
                 self._slab.release(row)
-        self._row = {p: r for p, r in self._row.items() if keep(p)}
-        self.born = {p: v for p, v in self.born.items() if keep(p)}
+        self._row = kept
+        self.born = {p: v for p, v in self.born.items() if p in kept}
 
     def remove_frame(self, k: int) -> None:
         """Forget keyframe k's edges and renumber the later keyframes down by one."""
