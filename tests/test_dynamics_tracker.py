@@ -264,3 +264,51 @@ def test_a_partly_matched_object_takes_its_other_piece_instead_of_a_new_id():
     far = _box(60, 21, 8, 10)  # 40 px from the centre, beyond 20 % of the width: a new object
     objs = tr.update(sliver | far)
     assert sorted(o.area for o in objs if o.id == a.id) == [36] and len(objs) == 2
+
+
+def _ground(boxes: dict[str, tuple[np.ndarray, tuple[float, float, float]]]) -> np.ndarray:
+    """(H, W, 3) ground points: each box's pixels stand at its position, spread ±0.1 m across the box; NaN elsewhere."""
+    out = np.full((H, W, 3), np.nan)
+    for box, pos in boxes.values():
+        ys, xs = np.nonzero(box)
+        out[ys, xs] = np.asarray(pos) + np.stack([0.2 * (xs - xs.mean()) / max(np.ptp(xs), 1),
+                                                  np.zeros(len(xs)), np.zeros(len(xs))], 1)
+    return out
+
+
+def test_the_ground_cue_splits_a_merged_blob_by_where_each_walker_stands():
+    """Two boxes at the same depth that touch in the image, with swapped image predictions: the image cues
+    swap their ids; their predicted places on the floor keep them."""
+    a0, b0 = _box(10, 20, 12, 16), _box(60, 20, 12, 16)
+    ga, gb = (0.0, 0.0, 2.0), (1.0, 0.0, 2.0)
+    a1, b1 = _box(30, 20, 12, 16), _box(42, 20, 12, 16)  # touching: one component
+    ga1, gb1 = (0.2, 0.0, 2.0), (0.8, 0.0, 2.0)
+    depth = np.full((H, W), 2.0)
+    for cue in (True, False):
+        tr = DynamicObjectTracker()
+        first = _ids_by_box(tr.update(a0 | b0, depth=depth, ground=_ground({"a": (a0, ga), "b": (b0, gb)}) if cue
+                                      else None), {"a": a0, "b": b0})
+        swapped = {first["a"]: (47.5, 27.5), first["b"]: (35.5, 27.5)}  # each image prediction on the other box
+        ground = _ground({"a": (a1, ga1), "b": (b1, gb1)}) if cue else None
+        objs = tr.update(a1 | b1, swapped, depth, ground=ground,
+                         predicted_ground={first["a"]: np.array(ga1), first["b"]: np.array(gb1)} if cue else None)
+        got = _ids_by_box(objs, {"a": a1, "b": b1})
+        if cue:
+            assert got == first
+            obj_a = next(o for o in objs if o.id == first["a"])
+            assert (obj_a.mask & a1).sum() == a1.sum() and not (obj_a.mask & b1).any()
+        else:
+            assert got == {"a": first["b"], "b": first["a"]}
+
+
+def test_the_ground_cue_claims_a_component_that_the_image_prediction_misses():
+    """A box 40 px from its predicted image place (beyond ADD-SLAM's 20 % jump) where it was predicted to stand
+    on the floor keeps its id; without the cue it gets a new one."""
+    depth = np.full((H, W), 2.0)
+    a0, a1 = _box(10, 20, 12, 16), _box(50, 20, 12, 16)
+    for cue in (True, False):
+        tr = DynamicObjectTracker()
+        (o0,) = tr.update(a0, depth=depth, ground=_ground({"a": (a0, (0.0, 0.0, 2.0))}) if cue else None)
+        (o1,) = tr.update(a1, {o0.id: o0.centre}, depth, ground=_ground({"a": (a1, (0.6, 0.0, 2.0))}) if cue else None,
+                          predicted_ground={o0.id: np.array([0.55, 0.0, 2.0])} if cue else None)
+        assert (o1.id == o0.id) == cue
