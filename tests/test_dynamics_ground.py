@@ -1,4 +1,4 @@
-"""The ground cue of track_objects: world points on the floor plane, given to the tracker only with sensor depth."""
+"""The ground cue of track_objects: world points on the floor plane (2D), given to the tracker only with sensor depth."""
 
 from __future__ import annotations
 
@@ -30,7 +30,8 @@ def test_up_is_the_mean_of_the_upright_cameras_minus_y_and_ground_drops_it():
     assert np.allclose(up, [0.0, -1.0, 0.0], atol=0.02)  # tilts of ±0.1 rad, not all cancelling
     points = np.array([[1.0, -1.7, 3.0], [1.0, 0.0, 3.0], [-2.0, 0.5, 1.0]])
     flat = _on_ground(points, up)
-    assert np.allclose(flat @ up, 0.0)
+    assert flat.shape == (3, 2)
+    assert abs(np.linalg.norm(flat[1] - flat[2]) - np.hypot(3.0, 2.0)) < 0.02  # the distance across the floor
     assert np.linalg.norm(flat[0] - flat[1]) < 0.05  # a head above its feet: the same place on the floor
     assert np.linalg.norm(flat[0] - flat[2]) > 3.0
 
@@ -62,9 +63,11 @@ def test_track_objects_gives_the_ground_cue_only_with_sensor_depth(monkeypatch, 
         assert all(g is None and p is None for g, p in seen)
         return
     ground, _ = seen[0]
-    assert ground.shape == (h, w, 3) and np.isfinite(ground).all()
-    assert np.allclose(ground[..., 1], 0.0)  # identity cameras: up is −y, the floor plane is y = 0
-    assert np.allclose(ground[6, 8], [(8 - w / 2) / 10 * 2, 0.0, 2.0])
+    assert ground.shape == (h, w, 2) and np.isfinite(ground).all()
+    # identity cameras, everything 2 m away: up is −y, so the floor distance of two pixels is their x distance
+    x = (np.arange(w) - w / 2) / 10 * 2
+    assert np.allclose(np.linalg.norm(ground[0] - ground[0, :1], axis=1), np.abs(x - x[0]))
+    assert np.allclose(ground[:, 3], ground[0, 3])  # a column of pixels: one place on the floor
     _, predicted = seen[2]  # by the third keyframe the object has a centroid and a (zero) velocity
     (g,) = predicted.values()
     assert np.allclose(g, ground[box.numpy()].mean(0), atol=1e-9)

@@ -267,12 +267,12 @@ def test_a_partly_matched_object_takes_its_other_piece_instead_of_a_new_id():
 
 
 def _ground(boxes: dict[str, tuple[np.ndarray, tuple[float, float, float]]]) -> np.ndarray:
-    """(H, W, 3) ground points: each box's pixels stand at its position, spread ±0.1 m across the box; NaN elsewhere."""
-    out = np.full((H, W, 3), np.nan)
+    """(H, W, 2) places on the floor: each box's pixels stand at its (x, y), spread ±0.1 m across the box; NaN
+    elsewhere."""
+    out = np.full((H, W, 2), np.nan)
     for box, pos in boxes.values():
         ys, xs = np.nonzero(box)
-        out[ys, xs] = np.asarray(pos) + np.stack([0.2 * (xs - xs.mean()) / max(np.ptp(xs), 1),
-                                                  np.zeros(len(xs)), np.zeros(len(xs))], 1)
+        out[ys, xs] = np.asarray(pos) + np.stack([0.2 * (xs - xs.mean()) / max(np.ptp(xs), 1), np.zeros(len(xs))], 1)
     return out
 
 
@@ -280,9 +280,9 @@ def test_the_ground_cue_splits_a_merged_blob_by_where_each_walker_stands():
     """Two boxes at the same depth that touch in the image, with swapped image predictions: the image cues
     swap their ids; their predicted places on the floor keep them."""
     a0, b0 = _box(10, 20, 12, 16), _box(60, 20, 12, 16)
-    ga, gb = (0.0, 0.0, 2.0), (1.0, 0.0, 2.0)
+    ga, gb = (0.0, 2.0), (1.0, 2.0)
     a1, b1 = _box(30, 20, 12, 16), _box(42, 20, 12, 16)  # touching: one component
-    ga1, gb1 = (0.2, 0.0, 2.0), (0.8, 0.0, 2.0)
+    ga1, gb1 = (0.2, 2.0), (0.8, 2.0)
     depth = np.full((H, W), 2.0)
     for cue in (True, False):
         tr = DynamicObjectTracker()
@@ -308,7 +308,7 @@ def test_the_ground_cue_claims_a_component_that_the_image_prediction_misses():
     a0, a1 = _box(10, 20, 12, 16), _box(50, 20, 12, 16)
     for cue in (True, False):
         tr = DynamicObjectTracker()
-        (o0,) = tr.update(a0, depth=depth, ground=_ground({"a": (a0, (0.0, 0.0, 2.0))}) if cue else None)
-        (o1,) = tr.update(a1, {o0.id: o0.centre}, depth, ground=_ground({"a": (a1, (0.6, 0.0, 2.0))}) if cue else None,
-                          predicted_ground={o0.id: np.array([0.55, 0.0, 2.0])} if cue else None)
+        (o0,) = tr.update(a0, depth=depth, ground=_ground({"a": (a0, (0.0, 2.0))}) if cue else None)
+        (o1,) = tr.update(a1, {o0.id: o0.centre}, depth, ground=_ground({"a": (a1, (0.6, 2.0))}) if cue else None,
+                          predicted_ground={o0.id: np.array([0.55, 2.0])} if cue else None)
         assert (o1.id == o0.id) == cue

@@ -39,10 +39,10 @@ After the global BA (:func:`finish`):
    stopgo 5 → 3, wobble 7 → 5, walk 2; with the centre hypotheses after it:
    wobble 7; carried forward by the edge (k − 1, k): 11, 3, 8, 3).  With a depth sensor
    the depth split does better without it (rotate 8 against 11, wobble 1
-   against 3).  With a depth sensor the tracker also gets each pixel's world
-   point on the ground plane, X − (X·u) u with u the up direction (the mean
-   of the cameras' −y axes: cameras held upright), and each object's X̄'
-   there: walkers that touch in the image stand apart on the floor, so a
+   against 3).  With a depth sensor the tracker also gets each pixel's place
+   on the floor, (X·e₁, X·e₂) for its world point X and a basis e₁, e₂ of the
+   plane normal to the up direction u (the mean of the cameras' −y axes:
+   cameras held upright), and each object's X̄' there: walkers that touch in the image stand apart on the floor, so a
    track claims the components near its X̄' and a shared component is split
    by the distance on the floor (id switches of the RGB-D captures, seeds
    1-3: 36 → 23; seed 4, held out: 10 → 6).  An active
@@ -240,8 +240,10 @@ def final_pass(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intri
 
 
 def _on_ground(points: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """World points (…, 3) projected on the plane through the origin normal to ``up``: X − (X·u) u."""
-    return points - (points @ up)[..., None] * up
+    """World points (…, 3) on the plane normal to ``up``: (X·e₁, X·e₂) for an orthonormal basis e₁, e₂ of it."""
+    e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 0.0, 1.0])
+    e1 /= np.linalg.norm(e1)
+    return points @ np.stack([e1, np.cross(up, e1)], 1)
 
 
 def _up(c2w: np.ndarray) -> np.ndarray:
@@ -303,7 +305,7 @@ def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, in
         carried = _carry(masks, k, ids[k - 1] if k and not sensor_depth else None)
         if sensor_depth:
             world = (rays * depth_np[..., None]) @ c2w[k][:3, :3].T + c2w[k][:3, 3]
-            ground = np.where((depth_np > 0)[..., None], _on_ground(world, up), np.nan)
+            ground = np.where((depth_np > 0)[..., None], _on_ground(world, up), np.nan)  # (h, w, 2)
             objs = tracker.update(mask, predicted, depth_np, predicted_depth, masks.image(k).numpy(), carried,
                                   ground, {tid: _on_ground(x, up) for tid, x in centroids.items()})
         else:

@@ -125,7 +125,7 @@ class _Frame:
     areas: np.ndarray  # (n,)
     depth: np.ndarray | None
     bins: np.ndarray | None  # colour bin per pixel
-    ground: np.ndarray | None = None  # (h, w, 3) world points on the ground plane (NaN: unknown)
+    ground: np.ndarray | None = None  # (h, w, 2) world points on the ground plane (NaN: unknown)
     ground_pred: dict[int, np.ndarray] = field(default_factory=dict)  # id → predicted ground position g'_t
 
     def ground_distance(self, tid: int) -> np.ndarray | None:
@@ -254,7 +254,7 @@ class DynamicObjectTracker:
         objs = make_objects(torch.from_numpy(depth_components(m.numpy(), dep, self.depth_step)), self.min_area)
         f = _Frame(objs.labels.numpy(), objs.centres.numpy(), objs.areas.numpy(), dep,
                    None if image is None else colour_bins(np.asarray(image).reshape(h, w, 3)),
-                   None if ground is None else np.asarray(ground, dtype=np.float64).reshape(h, w, 3),
+                   None if ground is None else np.asarray(ground, dtype=np.float64).reshape(h, w, -1),
                    dict(predicted_ground or {}))
         live = self.live()
         missed = {tid: self.dormant[tid][1] if tid in self.dormant else 0 for tid in live}
