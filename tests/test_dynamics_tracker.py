@@ -312,3 +312,20 @@ def test_the_ground_cue_claims_a_component_that_the_image_prediction_misses():
         (o1,) = tr.update(a1, {o0.id: o0.centre}, depth, ground=_ground({"a": (a1, (0.6, 2.0))}) if cue else None,
                           predicted_ground={o0.id: np.array([0.55, 2.0])} if cue else None)
         assert (o1.id == o0.id) == cue
+
+
+def test_tracks_predicted_in_one_place_on_the_floor_are_split_by_the_image():
+    """Two claimers predicted at the same place on the floor (walkers passing through each other): the floor
+    cannot part them (equal costs give one track the whole blob), so the image predictions split it."""
+    a0, b0 = _box(10, 20, 12, 16), _box(60, 20, 12, 16)
+    a1, b1 = _box(30, 20, 12, 16), _box(42, 20, 12, 16)
+    depth = np.full((H, W), 2.0)
+    for apart, split in ((0.15, True), (0.0, False)):
+        tr = DynamicObjectTracker(ground_apart=apart)
+        first = _ids_by_box(tr.update(a0 | b0, depth=depth, ground=_ground({"a": (a0, (0.0, 2.0)), "b": (b0, (1.0, 2.0))})),
+                            {"a": a0, "b": b0})
+        here = {first["a"]: (35.5, 27.5), first["b"]: (47.5, 27.5)}
+        same = {first["a"]: np.array([0.5, 2.0]), first["b"]: np.array([0.5, 2.0])}
+        objs = tr.update(a1 | b1, here, depth, ground=_ground({"a": (a1, (0.45, 2.0)), "b": (b1, (0.55, 2.0))}),
+                         predicted_ground=same)
+        assert (len(objs) == 2 and _ids_by_box(objs, {"a": a1, "b": b1}) == first) == split

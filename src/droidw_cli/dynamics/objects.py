@@ -44,8 +44,9 @@ After the global BA (:func:`finish`):
    plane normal to the up direction u (the mean of the cameras' −y axes:
    cameras held upright), and each object's X̄' there: walkers that touch in the image stand apart on the floor, so a
    track claims the components near its X̄' and a shared component is split
-   by the distance on the floor (id switches of the RGB-D captures, seeds
-   1-3: 36 → 23; seed 4, held out: 10 → 6).  An active
+   by the distance on the floor unless the claimers stand in one place (id
+   switches of the RGB-D captures, seeds 1-3: 36 → 21; seed 4, held out:
+   10 → 5).  An active
    object that finds no mask at c' is *propagated* from c': the 3 × 3 pixels
    at c' prompt the segmenter when the new keyframe there still looks like
    the object (depth within ``depth_rel_tol`` of its median depth δ, colour
