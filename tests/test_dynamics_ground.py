@@ -1,4 +1,4 @@
-"""The ground cue of track_objects: world points on the floor plane (2D), given to the tracker only with sensor depth."""
+"""The ground cue of track_objects: places on the floor (2D), given to the tracker only with sensor depth."""
 
 from __future__ import annotations
 

@@ -322,8 +322,8 @@ def test_tracks_predicted_in_one_place_on_the_floor_are_split_by_the_image():
     depth = np.full((H, W), 2.0)
     for apart, split in ((0.15, True), (0.0, False)):
         tr = DynamicObjectTracker(ground_apart=apart)
-        first = _ids_by_box(tr.update(a0 | b0, depth=depth, ground=_ground({"a": (a0, (0.0, 2.0)), "b": (b0, (1.0, 2.0))})),
-                            {"a": a0, "b": b0})
+        ground = _ground({"a": (a0, (0.0, 2.0)), "b": (b0, (1.0, 2.0))})
+        first = _ids_by_box(tr.update(a0 | b0, depth=depth, ground=ground), {"a": a0, "b": b0})
         here = {first["a"]: (35.5, 27.5), first["b"]: (47.5, 27.5)}
         same = {first["a"]: np.array([0.5, 2.0]), first["b"]: np.array([0.5, 2.0])}
         objs = tr.update(a1 | b1, here, depth, ground=_ground({"a": (a1, (0.45, 2.0)), "b": (b1, (0.55, 2.0))}),

@@ -42,11 +42,11 @@ After the global BA (:func:`finish`):
    against 3).  With a depth sensor the tracker also gets each pixel's place
    on the floor, (X·e₁, X·e₂) for its world point X and a basis e₁, e₂ of the
    plane normal to the up direction u (the mean of the cameras' −y axes:
-   cameras held upright), and each object's X̄' there: walkers that touch in the image stand apart on the floor, so a
-   track claims the components near its X̄' and a shared component is split
-   by the distance on the floor unless the claimers stand in one place (id
-   switches of the RGB-D captures, seeds 1-3: 36 → 21; seed 4, held out:
-   10 → 5).  An active
+   cameras held upright), and each object's X̄' there: walkers that touch in
+   the image stand apart on the floor, so a track claims the components near
+   its X̄' and a shared component is split by the distance on the floor unless
+   the claimers stand in one place (id switches of the RGB-D captures, seeds
+   1-3: 36 → 21; seed 4, held out: 10 → 5).  An active
    object that finds no mask at c' is *propagated* from c': the 3 × 3 pixels
    at c' prompt the segmenter when the new keyframe there still looks like
    the object (depth within ``depth_rel_tol`` of its median depth δ, colour
@@ -241,7 +241,7 @@ def final_pass(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, intri
 
 
 def _on_ground(points: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """World points (…, 3) on the plane normal to ``up``: (X·e₁, X·e₂) for an orthonormal basis e₁, e₂ of it."""
+    """World points (…, 3) on the plane normal to ``up``: (X·e₁, X·e₂), e₁ and e₂ an orthonormal basis of it."""
     e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 0.0, 1.0])
     e1 /= np.linalg.norm(e1)
     return points @ np.stack([e1, np.cross(up, e1)], 1)

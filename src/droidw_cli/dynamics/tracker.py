@@ -38,9 +38,9 @@ predicted depth δ'_t; else c'_t = c_t, δ'_t = δ_t.
 
    averaged over a ``split_blur`` × ``split_blur`` window, among the tracks it
    fits (ties to the nearer track: it occludes the other).
-   *Ground cue* (a depth sensor's runs): the caller may give each pixel's world
-   point G_p on the ground plane (the plane normal to up; NaN: no depth) and
-   each track's predicted position g'_t there.  Walkers that touch or overlap
+   *Ground cue* (a depth sensor's runs): the caller may give each pixel's place
+   G_p on the floor (2D coordinates in the plane normal to up; NaN: no depth)
+   and each track's predicted place g'_t there.  Walkers that touch or overlap
    in the image stand apart on the floor: in the merged components of four
    synthetic RGB-D runs, each walker's own centroid on the floor labels 93-98 %
    of the two walkers' pixels right by the nearer centroid, against 83-91 % by
@@ -128,15 +128,18 @@ class _Frame:
     areas: np.ndarray  # (n,)
     depth: np.ndarray | None
     bins: np.ndarray | None  # colour bin per pixel
-    ground: np.ndarray | None = None  # (h, w, 2) world points on the ground plane (NaN: unknown)
-    ground_pred: dict[int, np.ndarray] = field(default_factory=dict)  # id → predicted ground position g'_t
+    ground: np.ndarray | None = None  # (h, w, 2) places G_p on the floor (NaN: unknown)
+    ground_pred: dict[int, np.ndarray] = field(default_factory=dict)  # id → predicted place g'_t
+    _distances: dict[int, np.ndarray] = field(default_factory=dict)
 
     def ground_distance(self, tid: int) -> np.ndarray | None:
-        """(h, w) distance on the ground plane from each pixel to g'_t (inf without depth); None without cue."""
+        """(h, w) |G_p − g'_t| on the floor (inf without depth); None without the cue."""
         if self.ground is None or tid not in self.ground_pred:
             return None
-        d = np.linalg.norm(self.ground - self.ground_pred[tid], axis=-1)
-        return np.where(np.isfinite(d), d, np.inf)
+        if tid not in self._distances:
+            d = np.linalg.norm(self.ground - self.ground_pred[tid], axis=-1)
+            self._distances[tid] = np.where(np.isfinite(d), d, np.inf)
+        return self._distances[tid]
 
     @property
     def n(self) -> int:
@@ -186,7 +189,8 @@ class DynamicObjectTracker:
     ground_reach: float = 0.5  # metres; id_replay.py, RGB-D seeds 1-3: switches 29 / 27 / 25 / 23 / 26 / 26 at
     #                             0.35 / 0.4 / 0.45 / 0.5 / 0.55 / 0.6
     ground_apart: float = 0.15  # metres; id_replay.py, RGB-D seeds 1-3 (seed 4): 23 (6) at 0 (the floor always),
-    #                             23 (3) / 22 (3) / 21 (5) / 22 (5) / 22 (5) / 23 (5) at 0.05 / 0.1 / 0.15 / 0.2 / 0.25 / 0.35
+    #                             23 (3) / 22 (3) / 21 (5) / 22 (5) / 22 (5) / 23 (5) at 0.05 / 0.1 / 0.15 / 0.2 /
+    #                             0.25 / 0.35
     reid_colour: float = 0.85
     reid_reach: float = 0.6
     reid_area: float = 3.0
@@ -220,7 +224,7 @@ class DynamicObjectTracker:
         g = [f.ground_pred.get(t) for t in owners] if f.ground is not None else [None]
         if any(x is None for x in g):
             return False
-        return all(np.linalg.norm(g[i] - g[j]) >= self.ground_apart for i in range(len(g)) for j in range(i + 1, len(g)))
+        return all(np.linalg.norm(a - b) >= self.ground_apart for i, a in enumerate(g) for b in g[i + 1:])
 
     def _split_cost(self, tid: int, pred: np.ndarray, f: _Frame, delta: float, floor: bool = True) -> np.ndarray:
         """Step 2: the per-pixel cost of giving a shared component's pixels to track ``tid``."""
