@@ -36,6 +36,21 @@ def test_up_is_the_mean_of_the_upright_cameras_minus_y_and_ground_drops_it():
     assert np.linalg.norm(flat[0] - flat[2]) > 3.0
 
 
+def _rot_z(a: float) -> np.ndarray:
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def test_no_up_when_the_cameras_are_not_held_upright():
+    c2w = np.tile(np.eye(4), (4, 1, 1))
+    for i, roll in enumerate([0.0, np.pi / 2, np.pi, 3 * np.pi / 2]):  # the camera turned round its axis
+        c2w[i, :3, :3] = _rot_z(roll)
+    assert _up(c2w) is None
+    assert _up(c2w[:0]) is None
+    c2w[:, :3, :3] = _rot_z(0.3)  # one steady roll of 17°: still a floor (tilted)
+    assert _up(c2w) is not None
+
+
 @pytest.mark.parametrize("sensor_depth", [True, False])
 def test_track_objects_gives_the_ground_cue_only_with_sensor_depth(monkeypatch, sensor_depth):
     h, w, n = 12, 16, 3

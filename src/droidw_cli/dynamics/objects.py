@@ -42,11 +42,12 @@ After the global BA (:func:`finish`):
    against 3).  With a depth sensor the tracker also gets each pixel's place
    on the floor, (X·e₁, X·e₂) for its world point X and a basis e₁, e₂ of the
    plane normal to the up direction u (the mean of the cameras' −y axes:
-   cameras held upright), and each object's X̄' there: walkers that touch in
-   the image stand apart on the floor, so a track claims the components near
-   its X̄' and a shared component is split by the distance on the floor unless
-   the claimers stand in one place (id switches of the RGB-D captures, seeds
-   1-3: 36 → 21; seed 4, held out: 10 → 5).  An active
+   cameras held upright; no floor cue when that mean is shorter than 0.5),
+   and each object's X̄' there: walkers that touch in the image stand apart
+   on the floor, so a track claims the components near its X̄' and a shared
+   component is split by the distance on the floor unless the claimers stand
+   in one place (id switches of the RGB-D captures, seeds 1-3: 36 → 21; seed
+   4, held out: 10 → 5).  An active
    object that finds no mask at c' is *propagated* from c': the 3 × 3 pixels
    at c' prompt the segmenter when the new keyframe there still looks like
    the object (depth within ``depth_rel_tol`` of its median depth δ, colour
@@ -247,10 +248,16 @@ def _on_ground(points: np.ndarray, up: np.ndarray) -> np.ndarray:
     return points @ np.stack([e1, np.cross(up, e1)], 1)
 
 
-def _up(c2w: np.ndarray) -> np.ndarray:
-    """The world's up direction as the mean of the keyframe cameras' −y axes (cameras held upright)."""
-    up = -c2w[:, :3, 1].mean(0)
-    return up / max(float(np.linalg.norm(up)), 1e-12)
+#: the cameras' −y axes must agree this well (length of their mean) for the floor cue: cameras held upright
+UPRIGHT = 0.5
+
+
+def _up(c2w: np.ndarray) -> np.ndarray | None:
+    """The world's up direction as the mean of the keyframe cameras' −y axes (cameras held upright); None
+    when the mean is shorter than :data:`UPRIGHT` (a camera turned on its side or upside down: no floor cue)."""
+    up = -c2w[:, :3, 1].mean(0) if len(c2w) else np.zeros(3)
+    norm = float(np.linalg.norm(up))
+    return up / norm if norm >= UPRIGHT else None
 
 
 def _centroid(mask: np.ndarray, depth: np.ndarray, rays: np.ndarray, c2w: np.ndarray) -> np.ndarray:
@@ -295,7 +302,7 @@ def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, in
     c2w = to_matrix(invert(g)) if n else np.zeros((0, 4, 4))
     history: dict[int, list[tuple[int, np.ndarray]]] = {}  # id → (keyframe, world centroid) so far
     times = np.asarray(masks.times, dtype=np.float64)
-    up = _up(c2w) if n else np.array([0.0, -1.0, 0.0])
+    up = _up(c2w) if sensor_depth else None
     focal = (float(kk[0]), float(kk[1]))
     for k in range(n):
         depth = _depth(d[k])
@@ -305,10 +312,13 @@ def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, in
         depth_np = depth.numpy().astype(np.float64)
         carried = _carry(masks, k, ids[k - 1] if k and not sensor_depth else None)
         if sensor_depth:
-            world = (rays * depth_np[..., None]) @ c2w[k][:3, :3].T + c2w[k][:3, 3]
-            ground = np.where((depth_np > 0)[..., None], _on_ground(world, up), np.nan)  # (h, w, 2)
+            ground, placed = None, None
+            if up is not None:
+                world = (rays * depth_np[..., None]) @ c2w[k][:3, :3].T + c2w[k][:3, 3]
+                ground = np.where((depth_np > 0)[..., None], _on_ground(world, up), np.nan)  # (h, w, 2)
+                placed = {tid: _on_ground(x, up) for tid, x in centroids.items()}
             objs = tracker.update(mask, predicted, depth_np, predicted_depth, masks.image(k).numpy(), carried,
-                                  ground, {tid: _on_ground(x, up) for tid, x in centroids.items()})
+                                  ground, placed)
         else:
             objs = tracker.update(mask, predicted, image=masks.image(k).numpy(), predicted_masks=carried)
         stats = {}
