@@ -260,12 +260,17 @@ def _up(c2w: np.ndarray) -> np.ndarray | None:
     return up / norm if norm >= UPRIGHT else None
 
 
+def _world(rays: np.ndarray, depth: np.ndarray, c2w: np.ndarray) -> np.ndarray:
+    """World points G⁻¹ · (D_p K⁻¹ p̃) of pixels given by their rays (…, 3) and depths (…)."""
+    return (rays * depth[..., None]) @ c2w[:3, :3].T + c2w[:3, 3]
+
+
 def _centroid(mask: np.ndarray, depth: np.ndarray, rays: np.ndarray, c2w: np.ndarray) -> np.ndarray:
     """World centroid X̄ of an object's pixels with known depth (NaN without any), step 3."""
     ok = mask & (depth > 0)
     if not ok.any():
         return np.full(3, np.nan)
-    return ((rays[ok] * depth[ok][:, None]) @ c2w[:3, :3].T + c2w[:3, 3]).mean(0)
+    return _world(rays[ok], depth[ok], c2w).mean(0)
 
 
 def _table(ids: np.ndarray, disps: Tensor, rays: np.ndarray, c2w: np.ndarray) -> np.ndarray:
@@ -314,8 +319,8 @@ def track_objects(masks: KeyframeMasks, poses_w2c: Tensor, disps_obs: Tensor, in
         if sensor_depth:
             ground, placed = None, None
             if up is not None:
-                world = (rays * depth_np[..., None]) @ c2w[k][:3, :3].T + c2w[k][:3, 3]
-                ground = np.where((depth_np > 0)[..., None], _on_ground(world, up), np.nan)  # (h, w, 2)
+                floor = _on_ground(_world(rays, depth_np, c2w[k]), up)
+                ground = np.where((depth_np > 0)[..., None], floor, np.nan)  # (h, w, 2)
                 placed = {tid: _on_ground(x, up) for tid, x in centroids.items()}
             objs = tracker.update(mask, predicted, depth_np, predicted_depth, masks.image(k).numpy(), carried,
                                   ground, placed)

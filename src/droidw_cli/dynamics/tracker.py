@@ -147,8 +147,16 @@ class _Frame:
 
     def overlap(self, pred: np.ndarray, fit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Step 2 for a predicted mask: o_c = |pred ∩ fit ∩ C_c| and the score o_c / min(|pred|, |C_c|), (n,) each."""
-        o = np.bincount(self.labels[pred & fit], minlength=self.n + 1)[1:].astype(np.float64)
-        return o, o / np.maximum(np.minimum(pred.sum(), self.areas), 1)
+        o = self.counts(pred & fit)
+        return o, self.score(o, int(pred.sum()))
+
+    def counts(self, pixels: np.ndarray) -> np.ndarray:
+        """(n,) pixels of each component among ``pixels``."""
+        return np.bincount(self.labels[pixels], minlength=self.n + 1)[1:].astype(np.float64)
+
+    def score(self, o: np.ndarray, size: int) -> np.ndarray:
+        """o_c / min(size, |C_c|): the overlap score of step 2 for a prediction of ``size`` pixels."""
+        return o / np.maximum(np.minimum(size, self.areas), 1)
 
 
 def _hypotheses(given: Hypotheses | None, centre: tuple[float, float]) -> list[tuple[float, float]]:
@@ -221,9 +229,9 @@ class DynamicObjectTracker:
     def _floor_apart(self, f: _Frame, owners: list[int]) -> bool:
         """Whether the claimers of a shared component all have predicted places on the floor, at least
         ``ground_apart`` from each other (else they stand in one place, and the floor cannot part them)."""
-        g = [f.ground_pred.get(t) for t in owners] if f.ground is not None else [None]
-        if any(x is None for x in g):
+        if f.ground is None or any(t not in f.ground_pred for t in owners):
             return False
+        g = [f.ground_pred[t] for t in owners]
         return all(np.linalg.norm(a - b) >= self.ground_apart for i, a in enumerate(g) for b in g[i + 1:])
 
     def _split_cost(self, tid: int, pred: np.ndarray, f: _Frame, delta: float, floor: bool = True) -> np.ndarray:
@@ -344,9 +352,8 @@ class DynamicObjectTracker:
         for tid, (c, p, ok) in chosen.items():  # ground claims: components near g'_t
             ground = f.ground_distance(tid)
             if ground is not None:
-                near = (ground < self.ground_reach) & (f.labels > 0)
-                o = np.bincount(f.labels[near], minlength=f.n + 1)[1:].astype(np.float64)
-                chosen[tid] = (c, p, ok | (o / np.maximum(np.minimum(p.sum(), f.areas), 1) >= self.min_overlap))
+                near = f.counts(ground < self.ground_reach)
+                chosen[tid] = (c, p, ok | (f.score(near, int(p.sum())) >= self.min_overlap))
         return chosen
 
     def _overlap_ok(self, f: _Frame, pred: np.ndarray, fit: np.ndarray) -> np.ndarray:
