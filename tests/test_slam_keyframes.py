@@ -128,6 +128,20 @@ def test_proximity_selection_with_nms():
     assert (2, 10) not in out and (6, 10) in out
 
 
+def test_depth_prior_without_valid_pixels_fixes_no_scale():
+    """A keyframe whose sensor depth is 0 (invalid) everywhere does not make the run metric; one valid pixel does."""
+    buf = KeyframeBuffer((2, 3), capacity=2)
+    thumb = np.zeros((1, 1, 3), np.uint8)
+    buf.append(0, 0.0, _pose((0.0, 0, 0)), 1.0, thumb, depth_prior=torch.zeros(2, 3))
+    assert not buf.has_prior and buf.depth_prior is not None
+    prior = torch.zeros(2, 3)
+    prior[1, 2] = 0.5
+    buf.append(1, 1.0, _pose((1.0, 0, 0)), 1.0, thumb, depth_prior=prior)
+    assert buf.has_prior and buf.depth_prior[1, 1, 2].item() == 0.5
+    buf.append(2, 2.0, _pose((2.0, 0, 0)), 1.0, thumb, depth_prior=torch.zeros(2, 3))
+    assert buf.has_prior
+
+
 def test_keyframe_removal_renumbers_buffer_and_edges():
     buf = KeyframeBuffer((2, 3), capacity=2)
     for n in range(4):

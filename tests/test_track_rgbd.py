@@ -145,6 +145,46 @@ def test_depth_needs_depth_images_and_a_positive_scale(seq, tmp_path, capsys):
     assert not (tmp_path / "o1").exists() and not (tmp_path / "o2").exists()
 
 
+def _copy_with(seq, dest, depth_lines=None, zero_depth=False):
+    import shutil
+
+    shutil.copytree(seq, dest)
+    if zero_depth:
+        for p in (dest / "depth").iterdir():
+            cv2.imwrite(str(p), np.zeros((240, 320), np.uint16))
+    if depth_lines is not None:
+        lines = (seq / "depth.txt").read_text().splitlines()
+        head = [ln for ln in lines if ln.startswith("#")]
+        body = [ln for ln in lines if not ln.startswith("#")]
+        (dest / "depth.txt").write_text("\n".join(head + depth_lines(body)) + "\n")
+    return dest
+
+
+def test_depth_without_any_valid_pixel_is_an_error_without_output(seq, tmp_path, capsys):
+    bad = _copy_with(seq, tmp_path / "zero", zero_depth=True)
+    out = tmp_path / "out"
+    code, _, err = run(["track", str(bad), "--depth", "--out", str(out), "--quiet", *SHORT], capsys)
+    assert code == 2 and "hold no depth" in err and not out.exists()
+
+
+def test_depth_listing_that_pairs_no_frame_is_an_error(seq, tmp_path, capsys):
+    shifted = _copy_with(seq, tmp_path / "shifted",
+                         lambda body: [f"{float(t) + 100:.6f} {name}" for t, name in (ln.split() for ln in body)])
+    out = tmp_path / "out"
+    code, _, err = run(["track", str(shifted), "--depth", "--out", str(out), "--quiet", *SHORT], capsys)
+    assert code == 2 and "none of the 40 selected frames has a depth image" in err and not out.exists()
+
+
+def test_frames_without_a_depth_image_are_counted_in_a_warning(seq, tmp_path, capsys):
+    from droidw_cli.commands.track import open_depth
+
+    half = _copy_with(seq, tmp_path / "half", lambda body: body[::2])
+    source = open_source(half)
+    open_depth(source, 5000.0)
+    assert "20 of the 40 selected frames have no depth image" in capsys.readouterr().err
+    assert sum(f.depth is None for f in source) == 20
+
+
 def test_export_objects_of_a_run_without_masks_is_an_error(seq, tmp_path, capsys):
     out = tmp_path / "plain"
     code, _, _ = run(["track", str(seq), "--out", str(out), "--quiet", "--max-frames", "12",

@@ -26,6 +26,10 @@ def depth_config(config_name: str, overrides, depth: bool) -> tuple[str, tuple[s
     return config_name, ("io.use_depth=true", *overrides)
 
 
+#: depth images decoded by :func:`check_depth`, spread evenly over the selected frames
+DEPTH_SAMPLES = 8
+
+
 def open_depth(source, depth_scale: float) -> None:
     """Prepare ``source`` for an RGB-D run: its depth scale, and mis-sized depth images as errors."""
     from droidw_cli.errors import InputError
@@ -35,8 +39,38 @@ def open_depth(source, depth_scale: float) -> None:
     if not getattr(source, "has_depth", False):
         raise InputError(f"{source.path}: RGB-D mode (--depth, config io.use_depth) needs depth images, and this "
                          f"input has none (a TUM/Bonn folder lists them in depth.txt)")
+    check_depth(source)
     source.depth_scale = float(depth_scale)
     source.strict_depth = True
+
+
+def check_depth(source) -> None:
+    """Fail before the run when no frame has usable depth; warn when some frames have no depth image.
+
+    A run whose every depth pixel is 0 (invalid) would have no metric scale yet be labelled metric.
+    Sampled: up to :data:`DEPTH_SAMPLES` paired depth images, evenly over the selection; it is an
+    error when none of them holds a non-zero pixel."""
+    import numpy as np
+
+    from droidw_cli.errors import InputError
+    from droidw_cli.io.frames import decode_depth
+
+    files = source.depth_files()
+    paired = [p for p in files if p is not None]
+    if not paired:
+        raise InputError(f"{source.path}: none of the {len(files)} selected frames has a depth image "
+                         f"(depth.txt lists none close enough to the frames' timestamps in rgb.txt)")
+    if len(paired) < len(files):
+        click.echo(f"droidw: warning: {len(files) - len(paired)} of the {len(files)} selected frames have no "
+                   f"depth image close to their timestamp; they are tracked without depth", err=True)
+    picks = np.unique(np.round(np.linspace(0, len(paired) - 1, min(DEPTH_SAMPLES, len(paired)))).astype(int))
+    for i in picks:
+        depth = decode_depth(paired[i], 1.0)
+        if depth is not None and bool((depth > 0).any()):
+            return
+    raise InputError(f"{source.path}: the depth images hold no depth: {len(picks)} of them, spread over the "
+                     f"sequence (e.g. {paired[picks[0]].name}), are unreadable or 0 (invalid) everywhere; check the "
+                     f"depth folder, or run without --depth")
 
 
 def run_track(input_path, out_dir, calib=None, backend="auto", config_name="default", overrides=(),

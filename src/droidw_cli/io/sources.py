@@ -107,6 +107,10 @@ class ListSource(FrameSource):
     def __len__(self) -> int:
         return len(self._entries)
 
+    def depth_files(self) -> list[Path | None]:
+        """The depth image paired with each selected frame (None: it has none)."""
+        return [e.depth for e in self._entries]
+
     def __iter__(self) -> Iterator[Frame]:
         for k, entry in enumerate(self._entries):
             img = decode_rgb(entry.rgb)

@@ -124,7 +124,7 @@ class KeyframeBuffer:
             if self.depth_prior is None:
                 self.depth_prior = torch.zeros_like(self.disps)
             self.depth_prior[k] = depth_prior.to(self.device)
-            self.has_prior = True
+            self.has_prior = self.has_prior or bool((depth_prior > 0).any())  # all-invalid depth fixes no scale
         self.frame_index.append(int(frame_index))
         self.timestamps.append(float(timestamp))
         self.thumbnails.append(encode_rgb(thumbnail, THUMBNAIL_QUALITY))
