@@ -78,7 +78,19 @@ def test_csv_manifest_with_set_and_override_columns(tmp_path):
     assert two.name == "seq2" and two.gt is None and two.overrides == () and two.config is None
 
 
+def test_depth_columns_and_the_align_default(tmp_path):
+    (tmp_path / "m.csv").write_text("input,gt,depth,depth_scale,align\n"
+                                    "a,a/gt.txt,yes,1000,\nb,b/gt.txt,,,SIM3\nc,,False,,\n")
+    a, b, c = load_manifest(tmp_path / "m.csv")
+    assert a.depth and a.depth_scale == 1000.0 and a.align is None  # se3 or sim3 once the run says metric or not
+    assert not b.depth and b.depth_scale == 5000.0 and b.align == "sim3"
+    assert not c.depth
+
+
 @pytest.mark.parametrize("text,message", [
+    ("- {input: a.mp4, depth: maybe}\n", "depth must be true or false"),
+    ("- {input: a.mp4, depth: true, depth_scale: 0}\n", "depth_scale must be a positive number"),
+    ("- {input: a.mp4, depth_scale: deep}\n", "depth_scale must be a positive number"),
     ("- {input: a.mp4, colour: red}\n", "unknown column(s) colour"),
     ("- {gt: g.txt}\n", "'input' is required"),
     ("- {input: a.mp4, name: x}\n- {input: b.mp4, name: x}\n", "given to more than one row"),
@@ -134,6 +146,19 @@ def test_in_order_without_ray_skips_finished_and_cleans_partials(clips, tmp_path
     # anything that needs Ray says how to install it
     code, _, err = run(["batch", str(manifest), "--out", str(out), "--workers", "2"], capsys)
     assert code == 2 and "pip install 'droidw[ray]'" in err and "\n" not in err.strip()
+
+
+def test_an_rgbd_row_is_metric_and_evaluated_in_se3(clips, tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)
+    manifest = write_manifest(clips, [{"name": "rgbd", "input": "seq1", "gt": "seq1/groundtruth.txt", "depth": True},
+                                      {"name": "mono", "input": "seq1", "gt": "seq1/groundtruth.txt"}], "rgbd.yaml")
+    out = tmp_path / "out"
+    code, _, err = run(["batch", str(manifest), "--out", str(out), "--quiet"], capsys)
+    assert code == 0, err
+    for name, metric, align in (("rgbd", True, "se3"), ("mono", False, "sim3")):
+        assert json.loads((out / name / "run.json").read_text())["metric"] is metric
+        assert json.loads((out / name / "eval.json").read_text())["align"] == align
+        assert json.loads((out / name / "status.json").read_text())["align"] == align
 
 
 def test_interrupt_leaves_no_half_written_sequence(clips, tmp_path, monkeypatch):

@@ -175,13 +175,13 @@ def test_depth_listing_that_pairs_no_frame_is_an_error(seq, tmp_path, capsys):
     assert code == 2 and "none of the 40 selected frames has a depth image" in err and not out.exists()
 
 
-def test_frames_without_a_depth_image_are_counted_in_a_warning(seq, tmp_path, capsys):
+def test_frames_without_a_depth_image_are_counted_in_a_warning(seq, tmp_path):
     from droidw_cli.commands.track import open_depth
 
     half = _copy_with(seq, tmp_path / "half", lambda body: body[::2])
     source = open_source(half)
-    open_depth(source, 5000.0)
-    assert "20 of the 40 selected frames have no depth image" in capsys.readouterr().err
+    notes = open_depth(source, 5000.0)
+    assert len(notes) == 1 and "20 of the 40 selected frames have no depth image" in notes[0]
     assert sum(f.depth is None for f in source) == 20
 
 

@@ -6,8 +6,11 @@ Columns (YAML keys):
 * ``name``: the sequence's output folder (default: the input's name);
 * ``calib``: a calibration file or ``auto`` (default: what came with the input);
 * ``gt``: a ground-truth trajectory; with it the sequence is evaluated;
-* ``align``: ``sim3`` (default), ``se3`` or ``none``, for the evaluation;
+* ``align``: ``sim3``, ``se3`` or ``none``, for the evaluation (default: ``se3`` for
+  a metric run, i.e. one with sensor depth, else ``sim3``);
 * ``config``: a built-in config name or a YAML file (default: ``default``);
+* ``depth``: ``true`` for RGB-D mode, as ``droidw track --depth``;
+  ``depth_scale``: its depth PNG units per metre (default 5000, TUM and Bonn);
 * ``set``: overrides, ``KEY=VALUE`` (YAML: a list of them or a mapping;
   CSV: separated by ``;``);
 * any column whose name contains a dot, e.g. ``frontend.window``: one override.
@@ -28,7 +31,7 @@ import yaml
 
 from droidw_cli.errors import UserError, yaml_problem
 
-COLUMNS = ("name", "input", "calib", "gt", "align", "config", "set")
+COLUMNS = ("name", "input", "calib", "gt", "align", "config", "depth", "depth_scale", "set")
 ALIGN_CHOICES = ("sim3", "se3", "none")
 _SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 
@@ -45,9 +48,11 @@ class Row:
     input: str
     calib: str | None = None
     gt: str | None = None
-    align: str = "sim3"
+    align: str | None = None  # None: se3 when the run is metric (sensor depth), else sim3
     config: str | None = None  # None: the batch's --config, else "default"
     overrides: tuple[str, ...] = ()
+    depth: bool = False
+    depth_scale: float = 5000.0
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -163,8 +168,8 @@ def _row(path: Path, line: int, r: dict) -> Row:
         raise ManifestError(f"{where}: 'input' is required")
     base = path.parent
     overrides = list(r.get("set") or []) + [f"{k}={_yaml_scalar(v)}" for k, v in r.items() if "." in str(k)]
-    align = str(r.get("align") or "sim3").lower()
-    if align not in ALIGN_CHOICES:
+    align = str(r["align"]).lower() if r.get("align") not in (None, "") else None
+    if align is not None and align not in ALIGN_CHOICES:
         raise ManifestError(f"{where}: align must be one of {', '.join(ALIGN_CHOICES)}, got {align!r}")
     calib = r.get("calib")
     calib = None if calib in (None, "") else (str(calib) if str(calib) == "auto" else _path(base, calib))
@@ -177,7 +182,34 @@ def _row(path: Path, line: int, r: dict) -> Row:
                             "(not starting with '.' or '-')")
     return Row(name=name, input=_path(base, r["input"]), calib=calib,
                gt=_path(base, r["gt"]) if r.get("gt") else None, align=align, config=config,
-               overrides=tuple(overrides))
+               overrides=tuple(overrides), depth=_flag(where, "depth", r.get("depth")),
+               depth_scale=_positive(where, "depth_scale", r.get("depth_scale"), 5000.0))
+
+
+def _flag(where: str, column: str, value) -> bool:
+    """A yes/no cell: YAML booleans, or true/false, yes/no, 1/0 (any case); unset is no."""
+    if value in (None, ""):
+        return False
+    if isinstance(value, bool):
+        return value
+    text = str(value).strip().lower()
+    if text in ("true", "yes", "1", "on"):
+        return True
+    if text in ("false", "no", "0", "off"):
+        return False
+    raise ManifestError(f"{where}: {column} must be true or false, got {value!r}")
+
+
+def _positive(where: str, column: str, value, default: float) -> float:
+    if value in (None, ""):
+        return default
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = float("nan")
+    if not number > 0:
+        raise ManifestError(f"{where}: {column} must be a positive number, got {value!r}")
+    return number
 
 
 def _path(base: Path, value) -> str:

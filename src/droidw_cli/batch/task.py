@@ -62,7 +62,7 @@ def run_sequence(row: dict, out_dir: str, threads: int = 1, backend: str = "auto
     name = row["name"]
     tmp = partial_dir(out, name)
     record = {"name": name, "input": row["input"], "gt": row.get("gt"), "status": "failed", "error": None,
-              "ate_rmse_m": None, "matches": None, "align": row.get("align", "sim3") if row.get("gt") else None,
+              "ate_rmse_m": None, "matches": None, "align": None,
               "frames": None, "keyframes": None, "fps": None, "seconds": None, "warnings": 0,
               "threads": int(threads), "host": platform.node()}
     start = time.perf_counter()
@@ -89,10 +89,13 @@ def _track_and_eval(row: dict, folder: Path, backend: str, record: dict, threads
     if not inp.exists():
         raise UserError(f"input not found: {inp}")
     result, _ = run_track(inp, folder, row.get("calib"), backend, row.get("config") or "default",
-                          (f"threads={max(1, threads)}", *(row.get("overrides") or ())), progress=False, echo=lambda *a, **k: None)
+                          (f"threads={max(1, threads)}", *(row.get("overrides") or ())), progress=False,
+                          echo=lambda *a, **k: None, depth=bool(row.get("depth")),
+                          depth_scale=float(row.get("depth_scale") or 5000.0))
     record.update(frames=int(len(result.timestamps)), keyframes=int(len(result.kf_index)),
                   fps=round(float(result.fps), 3), warnings=len(result.warnings))
     if row.get("gt"):
+        record["align"] = row.get("align") or ("se3" if result.metric else "sim3")
         _evaluate(row, folder, record)
 
 
@@ -106,7 +109,7 @@ def _evaluate(row: dict, folder: Path, record: dict) -> None:
         raise UserError(f"{gt.path}: a KITTI ground truth has no timestamps; give a TUM or EuRoC file")
     est = read_trajectory(folder / "traj.txt")
     max_diff = 0.02
-    ate = evaluate_ate(gt.traj, est, row.get("align") or "sim3", max_diff)
+    ate = evaluate_ate(gt.traj, est, record["align"], max_diff)
     info = EvalInfo(str(gt.path), str(folder.parent / row["name"] / "traj.txt"), len(gt.traj), len(est), max_diff)
     (folder / "eval.json").write_text(json.dumps(to_json_dict(info, ate), indent=2) + "\n")
     save_results(folder / "ate.zip", ate, str(gt.path), row["name"])

@@ -37,10 +37,12 @@ def _default_workers() -> int:
 def batch(manifest, out_dir, address, workers, threads, config_name, overrides, backend, force, quiet):
     """Track every sequence of MANIFEST (YAML or CSV), then evaluate those with a ground truth.
 
-    Each row has `input` and optionally `name`, `calib`, `gt`, `align`,
-    `config`, `set` (KEY=VALUE overrides) or override columns such as
-    `frontend.window`.  --set applies to every row, before the row's own
-    overrides.  Exit code 1 when a sequence failed.
+    Each row has `input` and optionally `name`, `calib`, `gt`, `align`
+    (default: se3 for a metric RGB-D run, else sim3), `config`, `depth`
+    (true: RGB-D mode, as `track --depth`), `depth_scale`, `set` (KEY=VALUE
+    overrides) or override columns such as `frontend.window`.  --set applies
+    to every row, before the row's own overrides.  Exit code 1 when a
+    sequence failed.
 
     \b
     Examples:

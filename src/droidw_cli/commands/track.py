@@ -30,8 +30,10 @@ def depth_config(config_name: str, overrides, depth: bool) -> tuple[str, tuple[s
 DEPTH_SAMPLES = 8
 
 
-def open_depth(source, depth_scale: float) -> None:
-    """Prepare ``source`` for an RGB-D run: its depth scale, and mis-sized depth images as errors."""
+def open_depth(source, depth_scale: float) -> list[str]:
+    """Prepare ``source`` for an RGB-D run: its depth scale, and mis-sized depth images as errors.
+
+    Returns the warnings of :func:`check_depth`."""
     from droidw_cli.errors import InputError
 
     if not depth_scale > 0:
@@ -39,13 +41,14 @@ def open_depth(source, depth_scale: float) -> None:
     if not getattr(source, "has_depth", False):
         raise InputError(f"{source.path}: RGB-D mode (--depth, config io.use_depth) needs depth images, and this "
                          f"input has none (a TUM/Bonn folder lists them in depth.txt)")
-    check_depth(source)
+    notes = check_depth(source)
     source.depth_scale = float(depth_scale)
     source.strict_depth = True
+    return notes
 
 
-def check_depth(source) -> None:
-    """Fail before the run when no frame has usable depth; warn when some frames have no depth image.
+def check_depth(source) -> list[str]:
+    """Fail before the run when no frame has usable depth; a warning when some frames have no depth image.
 
     A run whose every depth pixel is 0 (invalid) would have no metric scale yet be labelled metric.
     Sampled: up to :data:`DEPTH_SAMPLES` paired depth images, evenly over the selection; it is an
@@ -60,14 +63,15 @@ def check_depth(source) -> None:
     if not paired:
         raise InputError(f"{source.path}: none of the {len(files)} selected frames has a depth image "
                          f"(depth.txt lists none close enough to the frames' timestamps in rgb.txt)")
+    notes = []
     if len(paired) < len(files):
-        click.echo(f"droidw: warning: {len(files) - len(paired)} of the {len(files)} selected frames have no "
-                   f"depth image close to their timestamp; they are tracked without depth", err=True)
+        notes.append(f"{len(files) - len(paired)} of the {len(files)} selected frames have no depth image close "
+                     f"to their timestamp; they are tracked without depth")
     picks = np.unique(np.round(np.linspace(0, len(paired) - 1, min(DEPTH_SAMPLES, len(paired)))).astype(int))
     for i in picks:
         depth = decode_depth(paired[i], 1.0)
         if depth is not None and bool((depth > 0).any()):
-            return
+            return notes
     raise InputError(f"{source.path}: the depth images hold no depth: {len(picks)} of them, spread over the "
                      f"sequence (e.g. {paired[picks[0]].name}), are unreadable or 0 (invalid) everywhere; check the "
                      f"depth folder, or run without --depth")
@@ -104,8 +108,7 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
     torch.manual_seed(cfg.seed)
     check_output_folder(out_dir)  # before the run, not after it
     source = open_source(input_path, stride=io.stride, start=io.start, max_frames=io.max_frames, fps=io.fps)
-    if io.use_depth:
-        open_depth(source, depth_scale)
+    notes = open_depth(source, depth_scale) if io.use_depth else []
     if calib is None:  # the calibration that came with the data, else estimate it
         calibration = source.intrinsics_hint
         if calibration is not None:
@@ -117,10 +120,11 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
     choice = resolve_backend(backend)
     ba_backend = choice.backend
     if choice.requested == "auto":  # say which one auto picked, and why not the others
-        click.echo(f"droidw: {choice.describe()}", err=True)
+        echo(f"droidw: {choice.describe()}", err=True)
     corr = get_correspondence_source(cfg.correspondence)
     features = get_feature_extractor(cfg.features.name) if cfg.uncertainty.enable else None
     result = Tracker(cfg, ba_backend, corr, features, progress=progress).run(source, calibration)
+    result.warnings = [*notes, *result.warnings]
     info = run_info(result, cfg.to_dict(), ba_backend.name, str(input_path), peak_memory_mb())
     info["calibration"]["source"] = (("estimated" if result.focal_estimated else "guessed")
                                      if result.calibration_estimated else (str(calib) if calib else "input"))
