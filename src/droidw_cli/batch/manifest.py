@@ -30,6 +30,7 @@ from pathlib import Path
 import yaml
 
 from droidw_cli.errors import UserError, yaml_problem
+from droidw_cli.io.sources import TUM_DEPTH_SCALE
 
 COLUMNS = ("name", "input", "calib", "gt", "align", "config", "depth", "depth_scale", "set")
 ALIGN_CHOICES = ("sim3", "se3", "none")
@@ -52,7 +53,7 @@ class Row:
     config: str | None = None  # None: the batch's --config, else "default"
     overrides: tuple[str, ...] = ()
     depth: bool = False
-    depth_scale: float = 5000.0
+    depth_scale: float = TUM_DEPTH_SCALE
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -183,7 +184,7 @@ def _row(path: Path, line: int, r: dict) -> Row:
     return Row(name=name, input=_path(base, r["input"]), calib=calib,
                gt=_path(base, r["gt"]) if r.get("gt") else None, align=align, config=config,
                overrides=tuple(overrides), depth=_flag(where, "depth", r.get("depth")),
-               depth_scale=_positive(where, "depth_scale", r.get("depth_scale"), 5000.0))
+               depth_scale=_positive(where, "depth_scale", r.get("depth_scale"), TUM_DEPTH_SCALE))
 
 
 def _flag(where: str, column: str, value) -> bool:

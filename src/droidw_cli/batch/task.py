@@ -91,7 +91,7 @@ def _track_and_eval(row: dict, folder: Path, backend: str, record: dict, threads
     result, _ = run_track(inp, folder, row.get("calib"), backend, row.get("config") or "default",
                           (f"threads={max(1, threads)}", *(row.get("overrides") or ())), progress=False,
                           echo=lambda *a, **k: None, depth=bool(row.get("depth")),
-                          depth_scale=float(row.get("depth_scale") or 5000.0))
+                          depth_scale=float(row["depth_scale"]))
     record.update(frames=int(len(result.timestamps)), keyframes=int(len(result.kf_index)),
                   fps=round(float(result.fps), 3), warnings=len(result.warnings))
     if row.get("gt"):

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from droidw_cli.commands.options import config_option, set_option
+from droidw_cli.io.sources import TUM_DEPTH_SCALE
 
 
 def peak_memory_mb() -> float:
@@ -79,7 +80,7 @@ def check_depth(source) -> list[str]:
 
 def run_track(input_path, out_dir, calib=None, backend="auto", config_name="default", overrides=(),
               stride=None, start=None, max_frames=None, progress=True, echo=click.echo, depth=False,
-              depth_scale=5000.0):
+              depth_scale=TUM_DEPTH_SCALE):
     """The work behind ``droidw track`` (also used by ``droidw demo`` and the benchmarks).
 
     ``depth``: RGB-D mode (:func:`depth_config`); ``depth_scale``: depth PNG units per metre.
@@ -148,7 +149,7 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
 @click.option("--depth", is_flag=True,
               help="RGB-D mode: the sensor depth feeds the depth prior and fixes the metric scale (the same as "
                    "--config rgbd; with another --config it adds io.use_depth=true).  Evaluate with --align se3.")
-@click.option("--depth-scale", type=float, default=5000.0, show_default=True,
+@click.option("--depth-scale", type=float, default=TUM_DEPTH_SCALE, show_default=True,
               help="Depth PNG units per metre (5000: TUM, Bonn).")
 @click.option("--stride", type=int, default=None, help="Use every N-th frame.")
 @click.option("--start", type=int, default=None, help="Skip the first N frames.")

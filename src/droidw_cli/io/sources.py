@@ -76,10 +76,13 @@ class Entry:
     depth: Path | None = None
 
 
+TUM_DEPTH_SCALE = 5000.0  # uint16 depth PNG units per metre (TUM, Bonn)
+
+
 class ListSource(FrameSource):
     """A source whose raw frames are a list of image files (with optional depth PNGs)."""
 
-    depth_scale = 5000.0  # uint16 depth PNG units per metre (TUM / Bonn)
+    depth_scale = TUM_DEPTH_SCALE
     load_depth = True  # False: skip decoding the depth PNGs (a monocular run does not read them)
     strict_depth = False  # True (RGB-D runs): a depth image whose size differs from its frame is an error
     lazy_depth = False  # True: Frame.depth is a LazyDepth (decoded when called), its size checked from the PNG header
