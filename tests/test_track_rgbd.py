@@ -185,6 +185,15 @@ def test_frames_without_a_depth_image_are_counted_in_a_warning(seq, tmp_path):
     assert sum(f.depth is None for f in source) == 20
 
 
+def test_a_depth_scale_that_gives_implausible_depth_is_a_warning(seq):
+    from droidw_cli.commands.track import open_depth
+
+    assert open_depth(open_source(seq), 5000.0) == []  # the generator's room: metres of depth
+    for scale in (50.0, 5e5):  # 100× too far, 100× too near
+        notes = open_depth(open_source(seq), scale)
+        assert len(notes) == 1 and "check --depth-scale" in notes[0] and f"--depth-scale {scale:g}" in notes[0]
+
+
 def test_export_objects_of_a_run_without_masks_is_an_error(seq, tmp_path, capsys):
     out = tmp_path / "plain"
     code, _, _ = run(["track", str(seq), "--out", str(out), "--quiet", "--max-frames", "12",
