@@ -46,9 +46,24 @@ def cached_sequence(cfg, name: str) -> Path:
     from droidw_cli.synth.writer import write_sequence
 
     folder = HERE / ".cache" / f"{name}-seed{cfg.seed}-{cfg.frames}"
-    if not (folder / "rgb.txt").exists():
+    if not _is_current(folder, cfg):
         write_sequence(cfg, folder, progress=False, overwrite=True)
     return folder
+
+
+def _is_current(folder: Path, cfg) -> bool:
+    """Whether ``folder`` holds ``cfg`` as rendered by this generator version (else it is rendered again)."""
+    import dataclasses
+    import json
+
+    from droidw_cli.synth.config import GENERATOR_VERSION
+
+    try:
+        meta = json.loads((folder / "synth.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return (folder / "rgb.txt").exists() and meta.get("version") == GENERATOR_VERSION and \
+        meta.get("config") == json.loads(json.dumps(dataclasses.asdict(cfg)))
 
 
 def peak_mb() -> float:

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: bumped whenever one SynthConfig renders differently (2: walkers keep apart, :mod:`droidw_cli.synth.crowd`)
+GENERATOR_VERSION = 2
 TUM_FOCAL_640 = 525.0  # the TUM RGB-D nominal focal length at 640×480
 MOTIONS = ("handheld", "wobble", "rotate", "stopgo", "fixed")  # camera path families, see synth.motions
 

@@ -9,7 +9,9 @@ spread over the sequence.
 
 The *far* walkers (1, 2, …) loop in the back part of the room (y ≥ FAR_Y).
 Their loops are drawn up to 8 times until their combined coverage stays
-below target − 0.08 (else the best draw is kept).
+below target − 0.08 (else the best draw is kept).  Once walker 0 is tuned,
+a far walker that would come within 0.7 m of a walker before it is drawn
+again (:mod:`droidw_cli.synth.crowd`): walkers do not walk through each other.
 
 Walker 0 is the *close* walker: its ellipse is laid out so that at the middle
 of the sequence it crosses the view sideways at distance d from the camera.
@@ -33,6 +35,7 @@ import numpy as np
 
 from droidw_cli.geometry.camera import scale_intrinsics
 from droidw_cli.synth import exposure, layout
+from droidw_cli.synth.crowd import extent, far_walk, keep_apart, shrink, slide
 from droidw_cli.synth.atlas import AtlasBuilder
 from droidw_cli.synth.config import SynthConfig, SynthFrame
 from droidw_cli.synth.motions import CameraMotion, camera_motion
@@ -42,8 +45,8 @@ from droidw_cli.synth.raycast import Box, RayCaster, box_hits, shade
 
 COVER_WIDTH = 48
 COVER_FRAMES = 90
-FAR_Y = 2.8  # the other walkers stay beyond this y (the camera is at y ≈ 0.5-1.3)
 MIN_CLEARANCE = 0.45  # metres between the camera and a walker's axis
+COVER_SLACK = 0.1  # a walker drawn again to keep apart may raise the walkers' coverage to target + this
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,49 +62,6 @@ class Walker:
         rot, pos = self.walk.state(t)
         parts = zip(self.centres, self.halves, self.tables)
         return [Box(pos + rot @ c, rot, h, tab, dynamic=True) for c, h, tab in parts]
-
-
-def _extent(e1: np.ndarray, a: float, b: float) -> np.ndarray:
-    """Half extents in x, y of the ellipse a cos(s) e₁ + b sin(s) e₂ (e₂ = e₁ turned 90°)."""
-    e2 = np.array([-e1[1], e1[0]])
-    return np.sqrt((a * e1) ** 2 + (b * e2) ** 2)
-
-
-def _shrink(e1: np.ndarray, a: float, b: float, lo: np.ndarray, hi: np.ndarray,
-            a_min: float = 0.5, b_min: float = 0.3) -> tuple[float, float]:
-    """Shrink (a, b) (not below a_min, b_min) until the ellipse fits in the rectangle's size."""
-    for _ in range(60):
-        if np.all(2 * _extent(e1, a, b) <= hi - lo) or (a <= a_min and b <= b_min):
-            break
-        a, b = max(a_min, 0.95 * a), max(b_min, 0.95 * b)
-    return a, b
-
-
-def _slide(centre: np.ndarray, direction: np.ndarray, ext: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Move ``centre`` along ``direction`` the least so that centre ± ext lies in [lo, hi]; clip if impossible."""
-    s_lo, s_hi = -np.inf, np.inf
-    for c in range(2):
-        a, b = lo[c] + ext[c] - centre[c], hi[c] - ext[c] - centre[c]
-        if abs(direction[c]) < 1e-9:
-            if a > 1e-9 or b < -1e-9:
-                s_lo, s_hi = 1.0, 0.0  # infeasible along this direction
-            continue
-        s1, s2 = sorted((a / direction[c], b / direction[c]))
-        s_lo, s_hi = max(s_lo, s1), min(s_hi, s2)
-    if s_lo <= s_hi:
-        return centre + float(np.clip(0.0, s_lo, s_hi)) * direction
-    return np.clip(centre, lo + ext, np.maximum(lo + ext, hi - ext))
-
-
-def _far_walk(rng: np.random.Generator, room: np.ndarray) -> EllipseWalk:
-    """A loop in the back part of the room, at least ~1.4 m in front of the camera."""
-    lo, hi = layout.walker_region(room, FAR_Y)
-    ang = rng.uniform(-0.4, 0.4) + (np.pi / 2 if rng.uniform() < 0.25 else 0.0)
-    e1 = np.array([np.cos(ang), np.sin(ang)])
-    a, b = _shrink(e1, rng.uniform(0.6, 1.5), rng.uniform(0.3, 0.6), lo, hi)
-    centre = _slide(rng.uniform(lo, hi), np.array([1.0, 0.0]), _extent(e1, a, b), lo, hi)
-    centre = _slide(centre, np.array([0.0, 1.0]), _extent(e1, a, b), lo, hi)
-    return make_walk(centre, e1, a, b, rng.uniform(0.6, 1.2), int(rng.choice([-1, 1])), rng.uniform(0, 2 * np.pi), 0.0)
 
 
 class _CloseWalkFactory:
@@ -129,13 +89,13 @@ class _CloseWalkFactory:
         q = self.cam_xy + d * self.fwd  # where the walker should be at the middle frame
         a, b = self.a, self.b
         while a > 0.8:  # a shorter loop rather than one slid out of view ...
-            ext = _extent(e1, a, b)
+            ext = extent(e1, a, b)
             if np.all(q + b * self.fwd - ext >= lo) and np.all(q + b * self.fwd + ext <= hi):
                 break
             a = max(0.8, 0.95 * a)
-        a, b = _shrink(e1, a, b, lo, hi)
+        a, b = shrink(e1, a, b, lo, hi)
         centre0 = q + b * self.fwd
-        centre = _slide(centre0, e1, _extent(e1, a, b), lo, hi)  # ... but slide it if it must
+        centre = slide(centre0, e1, extent(e1, a, b), lo, hi)  # ... but slide it if it must
         # pass the point of the loop's near side nearest to q at the middle frame
         c = float(np.clip(-(centre - centre0) @ e1 / a, -1.0, 1.0))
         s_at = float(np.arctan2(-np.sqrt(1.0 - c * c), c))
@@ -219,7 +179,8 @@ class Scene:
 
     def _walks(self, walker_parts) -> list[EllipseWalk]:
         """The walkers' paths: the far ones by rejection sampling (their combined coverage
-        below target − 0.08 if possible, 8 tries), then walker 0 tuned to the target."""
+        below target − 0.08 if possible, 8 tries), then walker 0 tuned to the target, then
+        the far ones that meet a walker before them drawn again (:func:`~droidw_cli.synth.crowd.keep_apart`)."""
         cfg = self.cfg
         if not walker_parts:
             return []
@@ -239,7 +200,7 @@ class Scene:
 
         best = None
         for attempt in range(8):
-            far = [_far_walk(np.random.default_rng([seed, layout.TAG_PATH + i, attempt]), self.room)
+            far = [far_walk(np.random.default_rng([seed, layout.TAG_PATH + i, attempt]), self.room)
                    for i in range(1, len(walker_parts))]
             others = np.zeros((len(ks), cw * ch), bool)
             for walk, parts in zip(far, walker_parts[1:]):
@@ -257,7 +218,18 @@ class Scene:
         dense = np.unique(np.round(np.linspace(0, cfg.frames - 1, min(cfg.frames, 20000))))
         clearance = (self.camera.position(self.camera_time(dense))[:, :2], self.walker_time(dense))
         walks = [_tune_close_walk(cfg, factory, parts0, others, poses, t_walk, intr_small, (cw, ch), clearance), *far]
-        return walks  # type: ignore[return-value]
+        hits: dict[int, tuple[EllipseWalk, np.ndarray]] = {}  # id → (walk, its hits): each walk cast once
+
+        def cover(walks: list[EllipseWalk]) -> float:
+            out = np.zeros((len(ks), cw * ch), bool)
+            for walk, parts in zip(walks, walker_parts):
+                if id(walk) not in hits:
+                    hits[id(walk)] = (walk, hits_of(walk, parts))
+                out |= hits[id(walk)][1]
+            return float(out.mean(1).max())
+
+        cap = max(cfg.target_coverage + COVER_SLACK, cover(walks))
+        return keep_apart(walks, clearance[1], clearance[0], self.room, seed, lambda w: cover(w) <= cap)
 
     # -- rendering ------------------------------------------------------------
     def boxes(self, k: float, static: bool = True, movers: bool = True) -> list[Box]:

@@ -9,7 +9,7 @@ Layout::
       rgb.txt depth.txt mask.txt   "# comments" then "timestamp path" lines
       groundtruth.txt      TUM trajectory, camera-to-world
       calib.txt            "fx fy cx cy"
-      synth.json           the SynthConfig used
+      synth.json           the SynthConfig used and the generator version
       video.mp4            optional (mp4v; falls back to video.avi with MJPG)
 
 The folder is written under a temporary name next to OUT and renamed at the
@@ -33,7 +33,7 @@ import numpy as np
 
 from droidw_cli.errors import UserError
 from droidw_cli.io.trajectory import Trajectory, atomic_write_text, write_trajectory
-from droidw_cli.synth.config import SynthConfig, SynthFrame
+from droidw_cli.synth.config import GENERATOR_VERSION, SynthConfig, SynthFrame
 from droidw_cli.synth.render import build_scene, render_sequence
 
 PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1]
@@ -152,7 +152,8 @@ def _write_into(cfg: SynthConfig, folder: Path, video: bool, progress: bool) -> 
     write_trajectory(folder / "groundtruth.txt", Trajectory(np.array(stamps), poses))
     fx, fy, cx, cy = cfg.intrinsics
     atomic_write_text(folder / "calib.txt", f"{fx:.6f} {fy:.6f} {cx:.6f} {cy:.6f}\n")
-    meta = {"generator": "droidw_cli.synth", "config": dataclasses.asdict(cfg), "walkers": len(scene.walkers)}
+    meta = {"generator": "droidw_cli.synth", "version": GENERATOR_VERSION, "config": dataclasses.asdict(cfg),
+            "walkers": len(scene.walkers)}
     atomic_write_text(folder / "synth.json", json.dumps(meta, indent=2) + "\n")
 
 
