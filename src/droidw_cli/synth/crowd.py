@@ -18,8 +18,8 @@ loops and a region that starts nearer the camera, but never nearer than
 a loop that crosses another walker's path can usually be walked so as to reach
 the crossing at another time.  The first timing that holds the clearance is
 kept, unless the scene refuses it (walker coverage of the image above its cap);
-after ``DRAWS`` draws the one that came closest to it is (walkers may then meet:
-the case of many walkers in a small room).  A walker that already keeps
+after ``DRAWS`` draws the admitted one that kept farthest apart is (walkers may
+then come closer than the clearance: many walkers in a small room).  A walker that already keeps
 apart keeps its loop, so scenes without meetings do not change.
 """
 
@@ -111,9 +111,9 @@ def _redraw(index: int, walk: EllipseWalk, placed: list[np.ndarray], t: np.ndarr
             if np.linalg.norm(path - cam_xy, axis=1).min() < CAMERA_GAP:
                 continue
             gap = _gap(path, placed)
-            if gap >= CLEARANCE and admits(candidate):
-                return candidate
-            if gap > best[0]:
+            if gap > best[0] and admits(candidate):
+                if gap >= CLEARANCE:
+                    return candidate
                 best = (gap, candidate)
     return best[1]
 

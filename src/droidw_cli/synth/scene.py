@@ -46,7 +46,10 @@ from droidw_cli.synth.raycast import Box, RayCaster, box_hits, shade
 COVER_WIDTH = 48
 COVER_FRAMES = 90
 MIN_CLEARANCE = 0.45  # metres between the camera and a walker's axis
-COVER_SLACK = 0.1  # a walker drawn again to keep apart may raise the walkers' coverage to target + this
+#: a walker drawn again to keep apart may raise the walkers' largest coverage of the image to
+#: max(target, the first draws') + COVER_SLACK and their mean coverage to the first draws' × COVER_MEAN
+COVER_SLACK = 0.03
+COVER_MEAN = 1.1
 
 
 @dataclass(frozen=True, eq=False)
@@ -220,16 +223,23 @@ class Scene:
         walks = [_tune_close_walk(cfg, factory, parts0, others, poses, t_walk, intr_small, (cw, ch), clearance), *far]
         hits: dict[int, tuple[EllipseWalk, np.ndarray]] = {}  # id → (walk, its hits): each walk cast once
 
-        def cover(walks: list[EllipseWalk]) -> float:
+        def cover(walks: list[EllipseWalk]) -> tuple[float, float]:
             out = np.zeros((len(ks), cw * ch), bool)
             for walk, parts in zip(walks, walker_parts):
                 if id(walk) not in hits:
                     hits[id(walk)] = (walk, hits_of(walk, parts))
                 out |= hits[id(walk)][1]
-            return float(out.mean(1).max())
+            share = out.mean(1)
+            return float(share.max()), float(share.mean())
 
-        cap = max(cfg.target_coverage + COVER_SLACK, cover(walks))
-        return keep_apart(walks, clearance[1], clearance[0], self.room, seed, lambda w: cover(w) <= cap)
+        largest, mean = cover(walks)
+        cap = (max(cfg.target_coverage, largest) + COVER_SLACK, mean * COVER_MEAN)
+
+        def admits(walks: list[EllipseWalk]) -> bool:
+            new_largest, new_mean = cover(walks)
+            return new_largest <= cap[0] and new_mean <= cap[1]
+
+        return keep_apart(walks, clearance[1], clearance[0], self.room, seed, admits)
 
     # -- rendering ------------------------------------------------------------
     def boxes(self, k: float, static: bool = True, movers: bool = True) -> list[Box]:
