@@ -172,7 +172,7 @@ def test_where_both_predictions_cover_a_merged_blob_colour_splits_it():
 def test_a_mostly_hidden_object_keeps_its_id_and_its_model():
     tr = DynamicObjectTracker()
     (a,) = tr.update(_box(20, 20, 12, 12))
-    (b,) = tr.update(_box(20, 20, 2, 12))  # a sixth of it left, under ``occluded`` (a quarter)
+    (b,) = tr.update(_box(20, 20, 4, 12))  # a third of it left
     assert b.id == a.id and b.occluded and tr.active[a.id].area == 144
     (c,) = tr.update(_box(21, 20, 12, 12))
     assert c.id == a.id and not c.occluded
@@ -256,14 +256,14 @@ def test_a_partly_matched_object_takes_its_other_piece_instead_of_a_new_id():
     split by a depth step got a new id for its other half)."""
     tr = DynamicObjectTracker()
     (a,) = tr.update(_box(20, 20, 12, 12))
-    sliver, piece = _box(20, 20, 2, 12), _box(34, 21, 8, 10)  # 24 px on the prediction, 80 px beside it
+    sliver, piece = _box(20, 20, 3, 12), _box(34, 21, 8, 10)  # 36 px on the prediction, 80 px beside it
     (b,) = tr.update(sliver | piece)
-    assert b.id == a.id and b.area == 24 + 80 and tr._next_id == 1
+    assert b.id == a.id and b.area == 36 + 80 and tr._next_id == 1
     tr = DynamicObjectTracker()
     (a,) = tr.update(_box(20, 20, 12, 12))
     far = _box(60, 21, 8, 10)  # 40 px from the centre, beyond 20 % of the width: a new object
     objs = tr.update(sliver | far)
-    assert sorted(o.area for o in objs if o.id == a.id) == [24] and len(objs) == 2
+    assert sorted(o.area for o in objs if o.id == a.id) == [36] and len(objs) == 2
 
 
 def _ground(boxes: dict[str, tuple[np.ndarray, tuple[float, float, float]]]) -> np.ndarray:

@@ -49,8 +49,8 @@ predicted depth δ'_t; else c'_t = c_t, δ'_t = δ_t.
    |{p ∈ C_c : |G_p − g'_t| < ``ground_reach``}| / min(|P_t|, |C_c|) ≥ ``min_overlap``,
    and the split cost of a pixel is |G_p − g'_t| alone (0 without depth), unless
    two claimers' g'_t lie within ``ground_apart`` of each other: walkers in one
-   place (side by side, or the synthetic ones of generator version 1, which
-   walked through each other) are split by the image cost above.
+   place (the synthetic ones walk through each other) are split by the image
+   cost above.
 3. Fallback for a track that claimed nothing (ADD-SLAM's centre prompt): the
    unclaimed component containing round(c'_t), else the one whose centre is
    nearest to c'_t within ``max_jump · w``, kept only if its area is at most
@@ -189,9 +189,7 @@ class DynamicObjectTracker:
     depth_step: float = 0.12  # id_replay.py, RGB-D captures of seeds 1-3 (2026-11-27): switches summed 41 at 0.15,
     #                          38 at 0.14, 35 at 0.13, 34 at 0.12 (no capture worse), 35 at 0.11, 36 at 0.10, 40 at
     #                          0.06 (docs/benchmarks.md, "Object ids: the depth step")
-    occluded: float = 0.25  # id_replay.py, RGB-D captures of seeds 1-3 (seed 4) of generator version 2 (walkers
-    #                        keep apart): switches summed 8 (3) / 7 (2) / 7 (2) / 8 (2) / 9 (2) / 10 (2) / 11 (4) at
-    #                        0.1 / 0.2 / 0.25 / 0.3 / 0.35 / 0.4 / 0.5, 16 (4) at 0.7 (docs/benchmarks.md)
+    occluded: float = 0.5
     split_px: float = 2.0
     split_depth: float = 0.1
     split_colour: float = 1.0
