@@ -45,7 +45,7 @@ def cached_sequence(cfg, name: str) -> Path:
     rendered on first use."""
     from droidw_cli.synth.writer import write_sequence
 
-    folder = HERE / ".cache" / f"{name}-seed{cfg.seed}-{cfg.frames}"
+    folder = HERE / ".cache" / f"{name}{'-apart' if cfg.apart else ''}-seed{cfg.seed}-{cfg.frames}"
     if not _is_current(folder, cfg):
         write_sequence(cfg, folder, progress=False, overwrite=True)
     return folder
@@ -56,14 +56,15 @@ def _is_current(folder: Path, cfg) -> bool:
     import dataclasses
     import json
 
-    from droidw_cli.synth.config import GENERATOR_VERSION
+    from droidw_cli.synth.config import GENERATOR_VERSION, SynthConfig
 
     try:
         meta = json.loads((folder / "synth.json").read_text())
     except (OSError, ValueError):
         return False
-    return (folder / "rgb.txt").exists() and meta.get("version") == GENERATOR_VERSION and \
-        meta.get("config") == json.loads(json.dumps(dataclasses.asdict(cfg)))
+    written = {**dataclasses.asdict(SynthConfig()), **meta.get("config", {})}  # fields added since: their defaults
+    return (folder / "rgb.txt").exists() and meta.get("version", 1) == GENERATOR_VERSION and \
+        written == json.loads(json.dumps(dataclasses.asdict(cfg)))
 
 
 def peak_mb() -> float:

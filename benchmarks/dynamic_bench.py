@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _bench_common import print_table, run_case_subprocess, track_source  # noqa: E402
+from _bench_common import cached_sequence, print_table, run_case_subprocess, track_source  # noqa: E402
 
 
 def keyframe_masks(cfg, scene, kf_index: np.ndarray, target_area: int) -> np.ndarray:
@@ -177,14 +177,10 @@ def one_mode(args: argparse.Namespace) -> None:
     from droidw_cli.io.frames import open_source
     from droidw_cli.io.trajectory import Trajectory
     from droidw_cli.synth import SynthConfig, build_scene
-    from droidw_cli.synth.writer import write_sequence
 
-    cache = Path(__file__).resolve().parent / ".cache"
-    cfg = SynthConfig.preset(args.preset, seed=args.seed, **({"frames": args.frames} if args.frames else {}))
-    folder = cache / f"{args.preset}-seed{cfg.seed}-{cfg.frames}"
-    if not (folder / "rgb.txt").exists():
-        write_sequence(cfg, folder, progress=False, overwrite=True)
-    source = open_source(folder)
+    cfg = SynthConfig.preset(args.preset, seed=args.seed, apart=args.apart,
+                             **({"frames": args.frames} if args.frames else {}))
+    source = open_source(cached_sequence(cfg, args.preset))
     overrides = [f"dynamics.mode={args.mode}", *args.set]
     if args.config == "rgbd":
         source.strict_depth = True
@@ -215,6 +211,7 @@ def one_mode(args: argparse.Namespace) -> None:
 
 def modes_table(args: argparse.Namespace) -> None:
     common = ["--frames", str(args.frames)] + [x for s in args.set for x in ("--set", s)]
+    common += ["--apart"] if args.apart else []
     rows = []
     for preset in args.presets:
         runs = [("default", m) for m in args.mono_modes] + [("rgbd", m) for m in args.rgbd_modes]
@@ -245,6 +242,7 @@ def main() -> None:
     ap.add_argument("--presets", nargs="+", default=["walk", "wobble", "stopgo", "rotate"])
     ap.add_argument("--mono-modes", nargs="*", default=["epipolar", "consistency", "both"])
     ap.add_argument("--rgbd-modes", nargs="*", default=["epipolar", "consistency", "both"])
+    ap.add_argument("--apart", action="store_true", help="with --modes: walkers keep apart (SynthConfig.apart)")
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--one-mode", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--config", default="default", help=argparse.SUPPRESS)

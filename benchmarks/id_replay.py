@@ -54,7 +54,7 @@ def capture_one(args: argparse.Namespace) -> None:
     from droidw_cli.synth import SynthConfig, build_scene
 
     config, mode = INPUTS[args.input]
-    cfg = SynthConfig.preset(args.preset, seed=args.seed)
+    cfg = SynthConfig.preset(args.preset, seed=args.seed, apart=args.apart)
     source = open_source(cached_sequence(cfg, args.preset))
     source.strict_depth = args.input == "rgbd"
     seen = {}
@@ -68,7 +68,7 @@ def capture_one(args: argparse.Namespace) -> None:
     result, _ = track_source(source, source.intrinsics_hint, [f"dynamics.mode={mode}"], config=config)
     truth = instance_masks(cfg, build_scene(cfg), result.kf_index, load_config(config, []).io.target_area)
     STORE.mkdir(parents=True, exist_ok=True)
-    path = STORE / f"{args.preset}-s{args.seed}-{args.input}.pkl"
+    path = STORE / f"{args.preset}{'-apart' if args.apart else ''}-s{args.seed}-{args.input}.pkl"
     tmp = path.with_suffix(".tmp")
     with open(tmp, "wb") as f:
         pickle.dump({"inputs": seen["inputs"], "ids": result.kf_object_ids, "truth": truth}, f)
@@ -181,6 +181,8 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                     help="a DynamicObjectTracker field for the replay")
     ap.add_argument("--only", nargs="+", default=[], metavar="NAME", help="captures to replay, e.g. rotate-s1-rgbd")
+    ap.add_argument("--apart", action="store_true", help="capture scenes whose walkers keep apart (SynthConfig.apart), "
+                    "stored as PRESET-apart-sN-INPUT")
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--preset", default="walk", help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
@@ -193,7 +195,7 @@ def main() -> None:
             for seed in args.seeds:
                 for kind in args.inputs:
                     r = run_case_subprocess("id_replay.py", ["--preset", preset, "--seed", str(seed),
-                                                             "--input", kind])
+                                                             "--input", kind] + (["--apart"] if args.apart else []))
                     print(f"captured {r['path']} ({r['keyframes']} keyframes)", file=sys.stderr, flush=True)
     else:
         replay_table(args)

@@ -45,7 +45,7 @@ def one(args: argparse.Namespace) -> None:
     from droidw_cli.synth import SynthConfig
     from droidw_cli.synth.source import SynthSource
 
-    over = {"seed": args.seed} | ({"frames": args.frames} if args.frames else {})
+    over = {"seed": args.seed, "apart": args.apart} | ({"frames": args.frames} if args.frames else {})
     cfg = SynthConfig.preset(args.preset, **over)
     if args.stream:
         source = SynthSource(cfg)
@@ -92,6 +92,7 @@ def main() -> None:
     ap.add_argument("--backend", default="cpu")
     ap.add_argument("--memory-minutes", type=float, nargs="*", default=[])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--apart", action="store_true", help="walkers keep apart (SynthConfig.apart)")
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--preset", default="walk", help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
@@ -101,6 +102,7 @@ def main() -> None:
         one(args)
         return
     common = ["--backend", args.backend, "--config", args.config] + [x for s in args.set for x in ("--set", s)]
+    common += ["--apart"] if args.apart else []
     rows = []
     for preset in args.presets:
         for seed in args.seeds:

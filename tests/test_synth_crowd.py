@@ -19,9 +19,9 @@ def _paths(walks, t):
 
 @pytest.mark.parametrize("preset, seed", [("rotate", 2), ("rotate", 4), ("fixed", 1), ("wobble", 4), ("walk", 1)])
 def test_preset_walkers_keep_apart_at_every_frame(preset, seed):
-    # these scenes had walkers meeting (within 0.01-0.4 m) before generator version 2 (rotate seed 1, not here,
-    # keeps 0.54 m: its fourth walker finds no loop 0.7 m clear within the coverage caps)
-    cfg = SynthConfig.preset(preset, seed=seed)
+    # without ``apart`` these scenes have walkers meeting (within 0.01-0.4 m); rotate seed 1, not here, keeps
+    # 0.54 m: its fourth walker finds no loop 0.7 m clear within the coverage caps
+    cfg = SynthConfig.preset(preset, seed=seed, apart=True)
     scene = build_scene(cfg)
     t = scene.walker_time(np.arange(cfg.frames))
     paths = _paths([w.walk for w in scene.walkers], t)
@@ -72,9 +72,27 @@ def test_a_refused_walker_is_not_taken():
     assert crowd.min_gap([first, other], t) >= crowd.CLEARANCE
 
 
+def test_apart_is_opt_in_and_the_default_scenes_do_not_change():
+    cfg = SynthConfig.preset("walk", seed=1)
+    plain, apart = build_scene(cfg), build_scene(cfg.replace(apart=True))
+    t = plain.walker_time(np.arange(cfg.frames))
+    assert plain.walkers[0].walk == apart.walkers[0].walk  # walker 0 is placed first and keeps its loop
+    assert crowd.min_gap([w.walk for w in plain.walkers], t) < 0.3  # the default walkers pass through each other
+    assert crowd.min_gap([w.walk for w in apart.walkers], t) >= crowd.CLEARANCE
+
+
 def test_written_sequences_record_the_generator_version(tmp_path):
-    cfg = SynthConfig.preset("dynamic-small", seed=2, frames=3)
+    cfg = SynthConfig.preset("dynamic-small", seed=2, frames=3, apart=True)
     write_sequence(cfg, tmp_path / "seq", progress=False)
     meta = json.loads((tmp_path / "seq" / "synth.json").read_text())
-    assert meta["version"] == GENERATOR_VERSION == 2
-    assert meta["config"]["seed"] == 2 and meta["walkers"] == 3
+    assert meta["version"] == GENERATOR_VERSION == 1
+    assert meta["config"]["seed"] == 2 and meta["config"]["apart"] is True and meta["walkers"] == 3
+
+
+def test_synth_apart_flag(tmp_path):
+    from droidw_cli.cli import main
+
+    main(["synth", str(tmp_path / "seq"), "--preset", "walk", "--frames", "2", "--size", "64x48", "--apart", "--quiet"])
+    main(["synth", str(tmp_path / "plain"), "--preset", "walk", "--frames", "2", "--size", "64x48", "--quiet"])
+    assert json.loads((tmp_path / "seq" / "synth.json").read_text())["config"]["apart"] is True
+    assert json.loads((tmp_path / "plain" / "synth.json").read_text())["config"]["apart"] is False

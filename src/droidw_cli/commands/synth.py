@@ -42,12 +42,13 @@ def _parse_size(ctx, param, value: str | None) -> tuple[int, int] | None:
 @click.option("--gain-drift", type=click.FloatRange(0, 1, max_open=True), default=None,
               help="Slow exposure gain change, e.g. 0.1 = ±10 % [0].")
 @click.option("--static", "static", is_flag=True, help="No movers: a static scene.")
+@click.option("--apart", is_flag=True, help="Walkers keep 0.7 m apart (by default they may walk through each other).")
 @click.option("--video", is_flag=True, help="Also write video.mp4 (video.avi if mp4v is unavailable).")
 @click.option("--overwrite", is_flag=True, help="Replace OUT_DIR if it exists and is not empty.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 def synth(out_dir: str, preset: str, frames: int | None, seed: int, movers: int | None, size, fps: float | None,
           noise: float | None, motion: str | None, blur: float | None, jpeg: int | None, gain_drift: float | None,
-          static: bool, video: bool, overwrite: bool, quiet: bool) -> None:
+          static: bool, apart: bool, video: bool, overwrite: bool, quiet: bool) -> None:
     """Generate a synthetic room with walking people and write it as a TUM-style folder.
 
     \b
@@ -74,6 +75,8 @@ def synth(out_dir: str, preset: str, frames: int | None, seed: int, movers: int 
                        ("gain_drift", gain_drift)):
         if value is not None:
             overrides[key] = value
+    if apart:
+        overrides["apart"] = True
     if static:
         overrides["static"] = True
     elif movers:

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: bumped whenever one SynthConfig renders differently (2: walkers keep apart, :mod:`droidw_cli.synth.crowd`)
-GENERATOR_VERSION = 2
+#: bumped whenever one SynthConfig renders differently (files written before it existed count as 1)
+GENERATOR_VERSION = 1
 TUM_FOCAL_640 = 525.0  # the TUM RGB-D nominal focal length at 640×480
 MOTIONS = ("handheld", "wobble", "rotate", "stopgo", "fixed")  # camera path families, see synth.motions
 
@@ -64,6 +64,11 @@ class SynthConfig:
       ``flicker`` (relative standard deviation);
     * ``noise_std`` as above;
     * ``jpeg_quality``: 1-100 passes the image through OpenCV JPEG (0 = off).
+
+    ``apart`` (off by default, so the presets' scenes and figures stay as
+    they were): walkers keep 0.7 m apart instead of walking through each
+    other (:mod:`droidw_cli.synth.crowd`): the far walkers that would meet a
+    walker before them are drawn again.
     """
 
     width: int = 640
@@ -91,6 +96,7 @@ class SynthConfig:
     jpeg_quality: int = 0
     gain_drift: float = 0.0
     flicker: float = 0.0
+    apart: bool = False
 
     def __post_init__(self) -> None:
         if int(self.width) != self.width or int(self.height) != self.height or self.width < 16 or self.height < 16:

@@ -20,7 +20,8 @@ the crossing at another time.  The first timing that holds the clearance is
 kept, unless the scene refuses it (walker coverage of the image above its cap);
 after ``DRAWS`` draws the admitted one that kept farthest apart is (walkers may
 then come closer than the clearance: many walkers in a small room).  A walker that already keeps
-apart keeps its loop, so scenes without meetings do not change.
+apart keeps its loop, so scenes without meetings do not change.  Opt-in:
+``SynthConfig.apart`` (``droidw synth --apart``).
 """
 
 from __future__ import annotations

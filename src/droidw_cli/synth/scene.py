@@ -9,9 +9,10 @@ spread over the sequence.
 
 The *far* walkers (1, 2, …) loop in the back part of the room (y ≥ FAR_Y).
 Their loops are drawn up to 8 times until their combined coverage stays
-below target − 0.08 (else the best draw is kept).  Once walker 0 is tuned,
-a far walker that would come within 0.7 m of a walker before it is drawn
-again (:mod:`droidw_cli.synth.crowd`): walkers do not walk through each other.
+below target − 0.08 (else the best draw is kept).  With ``cfg.apart``, once
+walker 0 is tuned, a far walker that would come within 0.7 m of a walker
+before it is drawn again (:mod:`droidw_cli.synth.crowd`); without it, walkers
+may walk through each other.
 
 Walker 0 is the *close* walker: its ellipse is laid out so that at the middle
 of the sequence it crosses the view sideways at distance d from the camera.
@@ -182,7 +183,7 @@ class Scene:
 
     def _walks(self, walker_parts) -> list[EllipseWalk]:
         """The walkers' paths: the far ones by rejection sampling (their combined coverage
-        below target − 0.08 if possible, 8 tries), then walker 0 tuned to the target, then
+        below target − 0.08 if possible, 8 tries), then walker 0 tuned to the target, then (``cfg.apart``)
         the far ones that meet a walker before them drawn again (:func:`~droidw_cli.synth.crowd.keep_apart`)."""
         cfg = self.cfg
         if not walker_parts:
@@ -221,6 +222,8 @@ class Scene:
         dense = np.unique(np.round(np.linspace(0, cfg.frames - 1, min(cfg.frames, 20000))))
         clearance = (self.camera.position(self.camera_time(dense))[:, :2], self.walker_time(dense))
         walks = [_tune_close_walk(cfg, factory, parts0, others, poses, t_walk, intr_small, (cw, ch), clearance), *far]
+        if not cfg.apart:
+            return walks  # type: ignore[return-value]
         hits: dict[int, tuple[EllipseWalk, np.ndarray]] = {}  # id → (walk, its hits): each walk cast once
 
         def cover(walks: list[EllipseWalk]) -> tuple[float, float]:
