@@ -19,9 +19,9 @@ a loop that crosses another walker's path can usually be walked so as to reach
 the crossing at another time.  The first timing that holds the clearance is
 kept, unless the scene refuses it (walker coverage of the image above its cap);
 after ``DRAWS`` draws the admitted one that kept farthest apart is (walkers may
-then come closer than the clearance: many walkers in a small room).  A walker that already keeps
-apart keeps its loop, so scenes without meetings do not change.  Opt-in:
-``SynthConfig.apart`` (``droidw synth --apart``).
+then come closer than the clearance: many walkers in a small room).  A walker
+that already keeps apart keeps its loop, so scenes without meetings do not
+change.  Opt-in: ``SynthConfig.apart`` (``droidw synth --apart``).
 """
 
 from __future__ import annotations
