@@ -81,6 +81,20 @@ def test_moving_mask_takes_any_edge_and_grows_by_the_dilation():
     assert grown.sum() == 18 and grown[4, 4] and not grown[3, 5]
 
 
+def test_moving_mask_grows_less_when_the_full_growth_covers_too_much():
+    """A mover over a fifth of the view: grown by 2 cells it would cover more than half, so with a limit
+    of 0.5 it is grown by the most cells that stay within it (1), and left ungrown when none does."""
+    d = np.zeros((12, 16), np.float32)
+    d[2:9, 3:10] = 2.0  # 49 of 192 cells
+    full = moving_mask([d], thresh=0.5, dilate=2)
+    assert full.sum() == 11 * 11
+    one = moving_mask([d], thresh=0.5, dilate=2, limit=0.5)
+    assert one.sum() == 9 * 9 and one[1, 2] and not one[0, 1]
+    bare = moving_mask([d], thresh=0.5, dilate=2, limit=0.3)
+    assert bare.sum() == 49
+    assert np.array_equal(moving_mask([d], thresh=0.5, dilate=2, limit=0.7), full)
+
+
 def test_moving_mask_threshold_rises_with_the_noise_level():
     noisy = np.full((12, 16), 0.4, np.float32)
     noisy[0, 0] = 0.4 * NOISE_FACTOR * 0.9  # above the fixed threshold, below the noise-scaled one

@@ -227,8 +227,9 @@ class Frontend:
         The mask of keyframe i is its scene-consistency mask (``dynamics.mode``
         consistency|both) joined with its epipolar mask (epipolar|both), which
         is recomputed from all its edges so far; it is always applied to the
-        raw confidences.  An epipolar mask over ``MAX_MOVING`` of the view means
-        no dominant rigid motion was found; it is left out.
+        raw confidences.  The epipolar mask is grown by fewer cells where its full
+        growth would cover over ``MAX_MOVING`` of the view; one over it ungrown means
+        no dominant rigid motion was found, and it is left out.
         """
         d = self.cfg.dynamics
         for i in frames:
@@ -239,7 +240,7 @@ class Frontend:
             masked = self.masks.current[i].numpy().copy()
             epi = [self._epipolar[key][0] for key, _ in mine if key in self._epipolar]
             if self._segmenting and epi:
-                moving = moving_mask(epi, d.epipolar_thresh, d.epipolar_dilate)
+                moving = moving_mask(epi, d.epipolar_thresh, d.epipolar_dilate, MAX_MOVING)
                 if moving.mean() > MAX_MOVING:
                     moving[:] = False
                 self.masks.record(i, moving)
