@@ -100,7 +100,8 @@ def test_uncertainty_ranks_movers_above_the_background(dynamic_runs):
     # 0.920 with dense keyframes before the grid units; 0.796 with these ~10 keyframes of a 30×40 grid
     # (the 300-frame benchmark gave 0.967-0.979 before the change); 0.807 → 0.749 when the epipolar masks
     # grew less instead of being dropped (likely, not tested: more masked pixels, the dilated ring included,
-    # read as doubt in the evidence channel; the 300-frame benchmark 0.911-0.935 → 0.876-0.902, docs/benchmarks.md "Epipolar masks that grow less").
+    # read as doubt in the evidence channel; the 300-frame benchmark 0.911-0.935 → 0.876-0.902,
+    # docs/benchmarks.md "Epipolar masks that grow less").
     # Chance is 0.5: this guards the ranking, not the benchmark's figure.
     assert score >= 0.7, f"AUROC {score:.3f}"
 
