@@ -15,7 +15,9 @@ Without ``--capture``: for every stored capture, the final masks
 (:func:`~droidw_cli.dynamics.objects.track_objects`) twice, with the
 :class:`~droidw_cli.dynamics.tracker.DynamicObjectTracker` defaults and with the ``--set``
 overrides of its fields.  Per capture and in total: the worst walker's id switches while in view
-(in brackets over all keyframes where it has an id), the share of walkers in view whose id another
+(in brackets over all keyframes where it has an id), the same as CLEAR MOT / MOTS count them
+(``dynamic_bench.mots_id_switches``: one-to-one matching by mask IoU > 0.5; in brackets the share of
+walkers in view matched), the share of walkers in view whose id another
 walker in view has too, and the number of ids, as ``dynamic_bench.py --modes`` counts them.  Column
 "same": the defaults gave the captured run's ids exactly (they do unless the object-id code changed since
 the capture; capture again then).  Column "merged": the share of walkers in view (per keyframe) whose
@@ -36,7 +38,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _bench_common import cached_sequence, print_table, run_case_subprocess, track_source  # noqa: E402
-from dynamic_bench import IN_VIEW, id_shared, id_switches, id_switches_any, instance_masks  # noqa: E402
+from dynamic_bench import (IN_VIEW, id_shared, id_switches, id_switches_any, instance_masks,  # noqa: E402
+                           mots_id_switches)
 
 STORE = Path(__file__).resolve().parent / ".cache" / "ids"
 #: a walker's component "holds" another walker when it covers this share of the other's mask
@@ -151,7 +154,7 @@ def replay_table(args: argparse.Namespace) -> None:
         paths = [p for p in paths if p.stem in set(args.only)]
     if not paths:
         raise SystemExit(f"no captures in {STORE}: run with --capture first")
-    rows, totals, merged = [], np.zeros(4), []
+    rows, totals, merged, mots = [], np.zeros(4), [], []
     for path in paths:
         with open(path, "rb") as f:
             capture = pickle.load(f)
@@ -159,17 +162,19 @@ def replay_table(args: argparse.Namespace) -> None:
         new = replay(capture, overrides) if overrides else base
         same = bool(np.array_equal(base[4], capture["ids"]))
         merged.append(merged_share(capture, base[4]))
+        mots.append(mots_id_switches(capture["truth"], base[4]))
         totals += [base[0], new[0], base[2], new[2]]
-        rows.append([path.stem, f"{base[0]} ({base[1]})", f"{100 * base[2]:.0f}", f"{100 * merged[-1]:.0f}", base[3],
+        rows.append([path.stem, f"{base[0]} ({base[1]})", f"{mots[-1][0]} ({100 * mots[-1][1]:.0f})",
+                     f"{100 * base[2]:.0f}", f"{100 * merged[-1]:.0f}", base[3],
                      "yes" if same else "NO",
                      f"{new[0]} ({new[1]})", f"{100 * new[2]:.0f}", new[3]])
         print(" | ".join(str(c) for c in rows[-1]), file=sys.stderr, flush=True)
-    rows.append(["total / mean", f"{totals[0]:.0f}", f"{100 * totals[2] / len(paths):.1f}",
+    rows.append(["total / mean", f"{totals[0]:.0f}", f"{sum(m[0] for m in mots)}", f"{100 * totals[2] / len(paths):.1f}",
                  f"{100 * np.mean(merged):.1f}", "", "",
                  f"{totals[1]:.0f}", f"{100 * totals[3] / len(paths):.1f}", ""])
     print(f"\nObject ids replayed, overrides: {overrides or 'none'}")
-    print_table(["capture", "switches (any)", "shared [%]", "merged [%]", "ids", "same", "with overrides: switches (any)",
-                 "shared [%]", "ids"], rows)
+    print_table(["capture", "switches (any)", "MOTS switches (matched [%])", "shared [%]", "merged [%]", "ids", "same",
+                 "with overrides: switches (any)", "shared [%]", "ids"], rows)
 
 
 def main() -> None:

@@ -67,3 +67,29 @@ def test_shared_ids_count_the_walkers_whose_id_another_walker_in_view_has():
     assert abs(bench.id_shared(np.stack([a, b]), ids) - 4 / 7) < 1e-9
     ids[:2][b[:2]] = 2
     assert bench.id_shared(np.stack([a, b]), ids) == 0.0
+
+
+def test_mots_switches_leave_a_walker_hidden_in_a_pile_unmatched_but_count_a_swap():
+    a = np.zeros((5, H, W), bool)
+    b = np.zeros_like(a)
+    a[:, :, :8] = True  # 160 cells
+    b[:, :, 16:] = True  # 80 cells: the pile's IoU is 160 / 240 with a, 80 / 240 with b
+    ids = np.full(a.shape, -1, np.int32)
+    ids[a] = 1
+    ids[b] = 2
+    ids[2][b[2]] = 1  # keyframe 2: one id on both walkers (a pile)
+    walkers = np.stack([a, b])
+    assert bench.id_switches(walkers, ids) == 2  # b: 2 → 1 → 2 by the majority id
+    assert bench.mots_id_switches(walkers, ids) == (0, 0.9)  # b unmatched in the pile: 9 of 10 pairs matched
+    ids[3:][a[3:]], ids[3:][b[3:]] = 2, 1  # the walkers trade ids from keyframe 3 on
+    assert bench.mots_id_switches(walkers, ids)[0] == 1
+
+
+def test_mots_switches_need_an_overlap_above_the_iou_and_restart_after_the_walker_leaves_the_view():
+    a = _walker([40, 40, 0, 40])[None]
+    ids = np.full(a.shape[1:], -1, np.int32)
+    ids[0][a[0, 0]] = 3
+    ids[1].reshape(-1)[:200] = 4  # covers the walker, IoU 40 / 200: not matched
+    ids[3][a[0, 3]] = 5  # back after leaving the view: a new visit
+    assert bench.mots_id_switches(a, ids) == (0, 2 / 3)
+    assert bench.mots_id_switches(a, ids, iou=0.1) == (1, 1.0)  # 3 → 4 once IoU 0.2 counts
