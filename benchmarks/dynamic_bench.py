@@ -173,16 +173,13 @@ def id_shared(instances: np.ndarray, ids: np.ndarray, in_view: float = IN_VIEW) 
 MOTS_IOU = 0.5
 
 
-def mots_id_switches(instances: np.ndarray, ids: np.ndarray, iou: float = MOTS_IOU,
-                     in_view: float = IN_VIEW) -> tuple[int, float]:
-    """Id switches as CLEAR MOT counts them (IDSW), on masks as MOTS does, while in view (as :func:`id_switches`).
+def mots_matches(instances: np.ndarray, ids: np.ndarray, iou: float = MOTS_IOU,
+                 in_view: float = IN_VIEW) -> tuple[np.ndarray, np.ndarray]:
+    """Per walker and keyframe its matched id (−1: none) and whether it is in view (both (walkers, K)).
 
-    Per keyframe each walker in view is matched to at most one id and each id to at most one walker
-    (the assignment of largest total mask IoU, pairs with IoU > ``iou`` kept); a switch is a matched id that
-    differs from the walker's previous matched id in the same visit.  Unlike :func:`id_switches`, a walker
-    that one id covers together with another walker (a pile) is unmatched there, not given the pile's id.
-    Returns the worst walker's switches and the share of (walker, keyframe) pairs in view that are matched.
-    """
+    Per keyframe each walker in view is matched to at most one id and each id to at most one walker:
+    the assignment of largest total mask IoU, of which the pairs with IoU > ``iou`` are kept (CLEAR MOT's
+    matching, on masks as in MOTS)."""
     from scipy.optimize import linear_sum_assignment
 
     n, k = instances.shape[:2]
@@ -200,16 +197,36 @@ def mots_id_switches(instances: np.ndarray, ids: np.ndarray, iou: float = MOTS_I
         rows, cols = linear_sum_assignment(-overlap)
         keep = overlap[rows, cols] > iou
         matched[rows[keep], j] = tracks[cols[keep]]
-    worst = 0
-    for w in range(n):
-        total, last = 0, -1
-        for j in range(k):
+    return matched, visible
+
+
+def mots_switch_events(matched: np.ndarray, visible: np.ndarray) -> list[tuple[int, int, int]]:
+    """The switches of :func:`mots_matches`' output as (walker, keyframe of the last match, keyframe of the new id):
+    a matched id that differs from the walker's previous matched id in the same visit (keyframes in view)."""
+    events = []
+    for w in range(len(matched)):
+        last = None
+        for j in range(matched.shape[1]):
             if not visible[w, j]:
-                last = -1  # a new visit
+                last = None  # a new visit
             elif matched[w, j] >= 0:
-                total += last >= 0 and matched[w, j] != last
-                last = matched[w, j]
-        worst = max(worst, int(total))
+                if last is not None and matched[w, j] != matched[w, last]:
+                    events.append((w, last, j))
+                last = j
+    return events
+
+
+def mots_id_switches(instances: np.ndarray, ids: np.ndarray, iou: float = MOTS_IOU,
+                     in_view: float = IN_VIEW) -> tuple[int, float]:
+    """Id switches as CLEAR MOT counts them (IDSW), on masks as MOTS does, while in view (as :func:`id_switches`).
+
+    Matching by :func:`mots_matches`, switches by :func:`mots_switch_events`.  Unlike :func:`id_switches`, a
+    walker that one id covers together with another walker (a pile) is unmatched there, not given the pile's id.
+    Returns the worst walker's switches and the share of (walker, keyframe) pairs in view that are matched.
+    """
+    matched, visible = mots_matches(instances, ids, iou, in_view)
+    per_walker = np.bincount([w for w, _, _ in mots_switch_events(matched, visible)], minlength=len(matched))
+    worst = int(per_walker.max()) if len(per_walker) else 0
     return worst, float((matched >= 0).sum() / max(1, visible.sum()))
 
 

@@ -2,6 +2,7 @@
 
     python benchmarks/id_replay.py --capture [--presets walk wobble stopgo rotate] [--seeds 1 2] [--inputs rgbd mono]
     python benchmarks/id_replay.py [--set depth_tol=0.35 --set min_overlap=0.2 ...] [--only rotate-s1-rgbd ...]
+    python benchmarks/id_replay.py --where [--only ...]
 
 Object ids are given once the run is over (``droidw_cli.dynamics.objects.finish``), from the
 keyframe masks, poses and depths of the run.  ``--capture`` tracks each cached preset (450 frames,
@@ -39,7 +40,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _bench_common import cached_sequence, print_table, run_case_subprocess, track_source  # noqa: E402
 from dynamic_bench import (IN_VIEW, id_shared, id_switches, id_switches_any, instance_masks,  # noqa: E402
-                           mots_id_switches)
+                           mots_id_switches, mots_matches, mots_switch_events)
 
 STORE = Path(__file__).resolve().parent / ".cache" / "ids"
 #: a walker's component "holds" another walker when it covers this share of the other's mask
@@ -177,6 +178,51 @@ def replay_table(args: argparse.Namespace) -> None:
                  "with overrides: switches (any)", "shared [%]", "ids"], rows)
 
 
+#: floor distances (m, between body axes) that ``--where`` counts switches in: through or touching each other,
+#: close, apart
+WHERE_BINS = (0.3, 0.6)
+
+
+def capture_config(stem: str):
+    """The generator's config of a capture named PRESET[-apart]-sN-INPUT (as :func:`capture_one` names it)."""
+    from droidw_cli.synth import SynthConfig
+
+    preset, _, rest = stem.rpartition("-s")
+    return SynthConfig.preset(preset.removesuffix("-apart"), seed=int(rest.split("-")[0]),
+                              apart=preset.endswith("-apart"))
+
+
+def where_table(args: argparse.Namespace) -> None:
+    """``--where``: per capture, each id switch (as MOTS counts them) and how close another walker came on the
+    floor between the walker's two matches (the generator's walkers, body axis to body axis)."""
+    from droidw_cli.synth import build_scene
+
+    paths = sorted(STORE.glob("*.pkl"))
+    if args.only:
+        paths = [p for p in paths if p.stem in set(args.only)]
+    rows, gaps = [], []
+    for path in paths:
+        with open(path, "rb") as f:
+            capture = pickle.load(f)
+        ids = replay(capture, {})[4]
+        cfg = capture_config(path.stem)
+        scene = build_scene(cfg)
+        times = np.asarray(capture["inputs"][0].times, dtype=np.float64)
+        frames = np.round((times - cfg.t0) * cfg.fps).astype(int)
+        place = np.stack([w.walk.state(scene.walker_time(frames))[1][:, :2] for w in scene.walkers])  # (W, K, 2)
+        near = []
+        for w, j0, j1 in mots_switch_events(*mots_matches(capture["truth"], ids)):
+            others = np.delete(place[:, j0:j1 + 1], w, axis=0)
+            near.append(float(np.linalg.norm(others - place[w, j0:j1 + 1], axis=-1).min()) if len(others) else np.inf)
+        gaps += near
+        rows.append([path.stem, len(near), " ".join(f"{d:.2f}" for d in near) or "–"])
+    g = np.asarray(gaps)
+    lo, hi = WHERE_BINS
+    print(f"\nId switches (MOTS) and the nearest other walker on the floor between the two matches [m]; of {len(g)}: "
+          f"{(g < lo).sum()} under {lo} m, {((g >= lo) & (g < hi)).sum()} at {lo}-{hi} m, {(g >= hi).sum()} at {hi} m or more")
+    print_table(["capture", "switches", "nearest other walker [m]"], rows)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--capture", action="store_true", help="track the presets and store the captures")
@@ -188,6 +234,8 @@ def main() -> None:
     ap.add_argument("--only", nargs="+", default=[], metavar="NAME", help="captures to replay, e.g. rotate-s1-rgbd")
     ap.add_argument("--apart", action="store_true", help="capture scenes whose walkers keep apart (SynthConfig.apart), "
                     "stored as PRESET-apart-sN-INPUT")
+    ap.add_argument("--where", action="store_true", help="per id switch (MOTS), how near another walker came "
+                    "on the floor (the generator's ground truth)")
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--preset", default="walk", help=argparse.SUPPRESS)
     ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
@@ -202,6 +250,8 @@ def main() -> None:
                     r = run_case_subprocess("id_replay.py", ["--preset", preset, "--seed", str(seed),
                                                              "--input", kind] + (["--apart"] if args.apart else []))
                     print(f"captured {r['path']} ({r['keyframes']} keyframes)", file=sys.stderr, flush=True)
+    elif args.where:
+        where_table(args)
     else:
         replay_table(args)
 

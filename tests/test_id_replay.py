@@ -48,3 +48,12 @@ def test_merged_counts_walkers_that_share_a_component_unless_a_depth_step_splits
     assert replay.merged_share(capture, ids) == 1.0
     ids[0][:, 5:] = -1  # the second walker unlabelled: the first one's component holds nobody else
     assert replay.merged_share(capture, ids) == 0.0
+
+
+@pytest.mark.parametrize("stem, preset, seed, apart", [("rotate-s3-rgbd", "rotate", 3, False),
+                                                        ("walk-static-s2-mono", "walk-static", 2, False),
+                                                        ("wobble-apart-s1-rgbd", "wobble", 1, True)])
+def test_a_capture_name_gives_back_the_generator_config(stem, preset, seed, apart):
+    from droidw_cli.synth import SynthConfig
+
+    assert replay.capture_config(stem) == SynthConfig.preset(preset, seed=seed, apart=apart)
