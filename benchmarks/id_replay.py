@@ -148,13 +148,17 @@ def parse_overrides(items: list[str]) -> dict[str, object]:
     return out
 
 
-def replay_table(args: argparse.Namespace) -> None:
-    overrides = parse_overrides(args.set)
-    paths = sorted(STORE.glob("*.pkl"))
-    if args.only:
-        paths = [p for p in paths if p.stem in set(args.only)]
+def capture_paths(only: list[str]) -> list[Path]:
+    """The stored captures, those named in ``only`` if any; exits when there are none."""
+    paths = [p for p in sorted(STORE.glob("*.pkl")) if not only or p.stem in set(only)]
     if not paths:
         raise SystemExit(f"no captures in {STORE}: run with --capture first")
+    return paths
+
+
+def replay_table(args: argparse.Namespace) -> None:
+    overrides = parse_overrides(args.set)
+    paths = capture_paths(args.only)
     rows, totals, merged, mots = [], np.zeros(4), [], []
     for path in paths:
         with open(path, "rb") as f:
@@ -197,9 +201,7 @@ def where_table(args: argparse.Namespace) -> None:
     floor between the walker's two matches (the generator's walkers, body axis to body axis)."""
     from droidw_cli.synth import build_scene
 
-    paths = sorted(STORE.glob("*.pkl"))
-    if args.only:
-        paths = [p for p in paths if p.stem in set(args.only)]
+    paths = capture_paths(args.only)
     rows, gaps = [], []
     for path in paths:
         with open(path, "rb") as f:
