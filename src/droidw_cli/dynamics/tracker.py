@@ -189,7 +189,8 @@ class DynamicObjectTracker:
     depth_step: float = 0.12  # id_replay.py, RGB-D captures of seeds 1-3 (2026-11-27): switches summed 41 at 0.15,
     #                          38 at 0.14, 35 at 0.13, 34 at 0.12 (no capture worse), 35 at 0.11, 36 at 0.10, 40 at
     #                          0.06 (docs/benchmarks.md, "Object ids: the depth step")
-    occluded: float = 0.5
+    occluded: float = 0.5  # id_replay.py, RGB-D captures of seeds 1-3 (default scenes): switches summed 21 at 0.5,
+    #                       22 / 24 / 25 at 0.4 / 0.3 / 0.25 (docs/benchmarks.md, "Walkers that keep apart")
     split_px: float = 2.0
     split_depth: float = 0.1
     split_colour: float = 1.0

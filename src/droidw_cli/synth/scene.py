@@ -223,7 +223,7 @@ class Scene:
         clearance = (self.camera.position(self.camera_time(dense))[:, :2], self.walker_time(dense))
         walks = [_tune_close_walk(cfg, factory, parts0, others, poses, t_walk, intr_small, (cw, ch), clearance), *far]
         if not cfg.apart:
-            return walks  # type: ignore[return-value]
+            return walks
         hits: dict[int, tuple[EllipseWalk, np.ndarray]] = {}  # id → (walk, its hits): each walk cast once
 
         def cover(walks: list[EllipseWalk]) -> tuple[float, float]:
