@@ -48,6 +48,7 @@ class _Request:
     seed: tuple[int, ...]
     shade: float
     group: int
+    rho: float
 
 
 class AtlasBuilder:
@@ -59,27 +60,37 @@ class AtlasBuilder:
         self._boxes: list[list[int]] = []
 
     def add_box(self, half: np.ndarray, materials: list[Material | None], shades: list[float],
-                seed: tuple[int, ...], group: int = 0) -> int:
+                seed: tuple[int, ...], group: int = 0, rho_scale: float = 1.0) -> int:
         """Register the 6 faces of a box; returns a handle for :meth:`build`'s tables.
 
         Groups are packed one after the other (group 0 on top, its width fixing
         the atlas width), so the layout of group 0 does not depend on later groups.
+        ``rho_scale``: this box's texel density is ``rho · rho_scale`` (the caster
+        must be given it: :attr:`droidw_cli.synth.raycast.Box.rho`).
         """
+        rho = self.rho * rho_scale
         ids = []
         for f in range(6):
             k = f // 2
             if materials[f] is None:
                 w = h = 2
             else:
-                w = int(np.ceil(2 * half[U_AXIS[k]] * self.rho)) + 1
-                h = int(np.ceil(2 * half[V_AXIS[k]] * self.rho)) + 1
+                w = int(np.ceil(2 * half[U_AXIS[k]] * rho)) + 1
+                h = int(np.ceil(2 * half[V_AXIS[k]] * rho)) + 1
             ids.append(len(self._requests))
-            self._requests.append(_Request(w, h, materials[f], (*seed, f), float(shades[f]), int(group)))
+            self._requests.append(_Request(w, h, materials[f], (*seed, f), float(shades[f]), int(group), rho))
         self._boxes.append(ids)
         return len(self._boxes) - 1
 
+    def add_panel(self, width: int, height: int, material: Material, seed: tuple[int, ...], group: int = 0) -> int:
+        """Register one free-standing texture of ``width`` × ``height`` texels (the sky); returns a handle
+        for :meth:`build`'s tables, whose table is then (1, 4)."""
+        self._requests.append(_Request(int(width), int(height), material, seed, 1.0, int(group), self.rho))
+        self._boxes.append([len(self._requests) - 1])
+        return len(self._boxes) - 1
+
     def build(self) -> tuple[np.ndarray, list[np.ndarray]]:
-        """The atlas (H, W, 3) uint8 and, per box, its (6, 4) float32 table (ox, oy, w − 1, h − 1)."""
+        """The atlas (H, W, 3) uint8 and, per box (panel), its (6, 4) ((1, 4)) float32 table (ox, oy, w − 1, h − 1)."""
         reqs = self._requests
         first = min(r.group for r in reqs)
         total = sum(r.w * r.h for r in reqs if r.group == first)
@@ -105,7 +116,7 @@ class AtlasBuilder:
             if r.material is None:
                 continue
             ox, oy = pos[i]
-            tex = r.material(r.h, r.w, self.rho, np.random.default_rng(list(r.seed)))
+            tex = r.material(r.h, r.w, r.rho, np.random.default_rng(list(r.seed)))
             tex = tex * np.float32(r.shade)
             atlas[oy:oy + r.h, ox:ox + r.w] = np.clip(np.rint(tex), 0, 255).astype(np.uint8)
         tables = []

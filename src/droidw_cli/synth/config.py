@@ -24,7 +24,9 @@ import numpy as np
 #: bumped whenever one SynthConfig renders differently (files written before it existed count as 1)
 GENERATOR_VERSION = 1
 TUM_FOCAL_640 = 525.0  # the TUM RGB-D nominal focal length at 640×480
-MOTIONS = ("handheld", "wobble", "rotate", "stopgo", "fixed")  # camera path families, see synth.motions
+#: camera path families that travel down a street (synth.forward); their scene is a street (synth.street)
+FORWARD_MOTIONS = ("forward", "ride", "drive")
+MOTIONS = ("handheld", "wobble", "rotate", "stopgo", "fixed") + FORWARD_MOTIONS  # camera path families, see synth.motions
 
 
 @dataclass(frozen=True)
@@ -65,6 +67,9 @@ class SynthConfig:
     * ``noise_std`` as above;
     * ``jpeg_quality``: 1-100 passes the image through OpenCV JPEG (0 = off).
 
+    ``grey``: the colour images become grey (ITU-R BT.601 luma in all three
+    channels, after the photometric chain), as from a KITTI grey camera.
+
     ``apart`` (off by default, so the presets' scenes and figures stay as
     they were): walkers keep 0.7 m apart instead of walking through each
     other (:mod:`droidw_cli.synth.crowd`): the far walkers that would meet a
@@ -97,6 +102,7 @@ class SynthConfig:
     gain_drift: float = 0.0
     flicker: float = 0.0
     apart: bool = False
+    grey: bool = False
 
     def __post_init__(self) -> None:
         if int(self.width) != self.width or int(self.height) != self.height or self.width < 16 or self.height < 16:
@@ -153,8 +159,11 @@ class SynthConfig:
 
     @property
     def rho(self) -> float:
-        """Texel density in texels per metre."""
-        return float(self.texel_density) if self.texel_density is not None else float(self.intrinsics[0]) / 2.0
+        """Texel density in texels per metre: by default fx / 2 in a room (one texel a pixel at 2 m) and
+        fx / 4 in a street (at 4 m: its surfaces are farther, and longer)."""
+        if self.texel_density is not None:
+            return float(self.texel_density)
+        return float(self.intrinsics[0]) / (4.0 if self.motion in FORWARD_MOTIONS else 2.0)
 
     def timestamp(self, k: int) -> float:
         """Timestamp of frame ``k`` in seconds, rounded to microseconds as written in the files."""
@@ -202,6 +211,19 @@ PRESETS.update({
                "frames": 450},
     "stopgo": {"motion": "stopgo", "movers": 2, "blur": 0.4, "jpeg_quality": 75, "frames": 450},
     "fixed": {"motion": "fixed", "movers": 3, "jpeg_quality": 75, "noise_std": 1.5, "frames": 300},
+})
+# forward motion down a street (synth.street_world): depth to 250 m in 16 bits at 1/256 m, as KITTI's depth maps
+_STREET = {"depth_scale": 256.0, "max_depth": 250.0}
+#: KITTI odometry's left grey camera (sequence 00, P0): 1241 × 376, fx = fy = 718.856
+KITTI_CAMERA = {"width": 1241, "height": 376, "fx": 718.856, "fy": 718.856, "cx": 607.1928, "cy": 185.2157}
+PRESETS.update({
+    "forward": {**_STREET, "motion": "forward", "movers": 3, "blur": 0.4, "jpeg_quality": 75, "noise_std": 1.5,
+                "gain_drift": 0.08, "frames": 450},
+    "ride": {**_STREET, "motion": "ride", "movers": 2, "blur": 0.3, "jpeg_quality": 75, "noise_std": 1.5,
+             "gain_drift": 0.05, "frames": 240},
+    "drive": {**_STREET, **KITTI_CAMERA, "motion": "drive", "movers": 3, "fps": 10.0, "blur": 0.15, "noise_std": 2.0,
+              "gain_drift": 0.05, "frames": 100, "texel_density": 90.0},
+    "forward-small": {**_STREET, "motion": "forward", "movers": 2, **_SMALL},
 })
 
 

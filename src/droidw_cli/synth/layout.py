@@ -26,7 +26,8 @@ WALL_MARGIN = 0.95  # walkers keep this far from the walls (furniture depth + bo
 @dataclass(frozen=True, eq=False)
 class BoxSpec:
     """A box before texturing: centre (in the world, or in the body frame for walker parts), half extents,
-    per-face material recipes (None = never visible) and baked shading factors."""
+    per-face material recipes (None = never visible), baked shading factors and its texel density as a
+    multiple of the scene's."""
 
     centre: np.ndarray
     half: np.ndarray
@@ -34,6 +35,7 @@ class BoxSpec:
     shades: list
     seed: tuple[int, ...]
     rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    rho_scale: float = 1.0
 
 
 def room_size(seed: int) -> np.ndarray:

@@ -70,6 +70,12 @@ class Wave:
         t = np.asarray(t, np.float64)[..., None]
         return (np.asarray(self.amp) * np.sin(np.asarray(self.omega) * t + np.asarray(self.phase))).sum(-1)
 
+    def rate(self, t) -> np.ndarray:
+        """df/dt = Σᵢ aᵢ ωᵢ cos(ωᵢ t + φᵢ)."""
+        t = np.asarray(t, np.float64)[..., None]
+        omega = np.asarray(self.omega)
+        return (np.asarray(self.amp) * omega * np.cos(omega * t + np.asarray(self.phase))).sum(-1)
+
     @staticmethod
     def random(rng: np.random.Generator, amps, periods) -> "Wave":
         """Random phases; periods (seconds) jittered by ±15 %."""

@@ -23,6 +23,16 @@ k = 2 → (x, y); v is "up" on vertical faces.
 
 For speed a box is only tested inside the bounding rectangle of its
 projected corners (the full image when a corner is behind the camera).
+
+A box may carry its own texel density (``Box.rho``; a street's far facades
+need fewer texels than its near kerb).  The room seen from inside may have an
+open top (``Box.sky``, a street): a ray that leaves it upwards sees the sky,
+which is at infinity.  It keeps depth ∞ (so every other surface is nearer)
+and takes its colour from the sky panel by direction alone: with the ray's
+world direction r, azimuth α = atan2(r_x, r_y) and elevation
+ε = atan2(r_z, ‖(r_x, r_y)‖), the panel's texel is
+(ox + (α/2π + ½)(w − 1), oy + (2ε/π)(h − 1)), the same for every camera
+position, as a sky at infinity is.
 """
 
 from __future__ import annotations
@@ -52,6 +62,8 @@ class Box:
     faces: np.ndarray
     dynamic: bool = False
     inside: bool = False
+    rho: float | None = None  # texels per metre (None: the caster's)
+    sky: np.ndarray | None = None  # (4,) atlas rect of the sky panel: the inside box's top face is open sky
 
 
 @dataclass
@@ -139,9 +151,17 @@ class RayCaster:
         fv = np.where(k2, p[1], p[2])
         byte = [q.view(np.uint8) for q in plus]
         face = np.where(k0, byte[0], np.where(k2, 4 + byte[2], 2 + byte[1]))
-        rho, half_px = self.rho, np.float32(0.5)
+        rho, half_px = (self.rho if box.rho is None else np.float32(box.rho)), np.float32(0.5)
         mx = _gather(box.faces, 0, face) + np.minimum(np.maximum(fu * rho - half_px, 0), _gather(box.faces, 2, face))
         my = _gather(box.faces, 1, face) + np.minimum(np.maximum(fv * rho - half_px, 0), _gather(box.faces, 3, face))
+        if box.sky is not None:
+            sky = win & (face == 5)
+            t = np.where(sky, np.float32(np.inf), t)
+            ox, oy, sw, sh = (np.float32(v) for v in box.sky)
+            horizontal = np.sqrt(d[0] * d[0] + d[1] * d[1])
+            sx = ox + (np.arctan2(d[0], d[1]) * np.float32(0.5 / np.pi) + np.float32(0.5)) * sw
+            sy = oy + np.clip(np.arctan2(d[2], horizontal) * np.float32(2.0 / np.pi), 0, 1) * sh
+            mx, my = np.where(sky, sx, mx), np.where(sky, sy, my)
         np.copyto(depth, t, where=win)
         np.copyto(hits.map_x[v0:v1, u0:u1], mx, where=win)
         np.copyto(hits.map_y[v0:v1, u0:u1], my, where=win)

@@ -32,18 +32,23 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from droidw_cli.geometry.camera import scale_intrinsics
 from droidw_cli.synth import exposure, layout
 from droidw_cli.synth.crowd import extent, far_walk, keep_apart, shrink, slide
 from droidw_cli.synth.atlas import AtlasBuilder
-from droidw_cli.synth.config import SynthConfig, SynthFrame
+from droidw_cli.synth.config import FORWARD_MOTIONS, SynthConfig, SynthFrame
 from droidw_cli.synth.motions import CameraMotion, camera_motion
 from droidw_cli.synth.paths import EllipseWalk, make_walk
 from droidw_cli.synth.photometric import Photometric, to_linear
 from droidw_cli.synth.raycast import Box, RayCaster, box_hits, shade
+from droidw_cli.synth.street_textures import sky as street_sky
+from droidw_cli.synth.street_world import LineWalk, street_world
 
+#: texels (azimuth × elevation from the horizon up) of a street's sky panel (synth.raycast)
+SKY_PANEL = (2048, 384)
 COVER_WIDTH = 48
 COVER_FRAMES = 90
 MIN_CLEARANCE = 0.45  # metres between the camera and a walker's axis
@@ -55,17 +60,24 @@ COVER_MEAN = 1.1
 
 @dataclass(frozen=True, eq=False)
 class Walker:
-    """Rigid parts (centre in body coordinates, half extents, atlas table) moving along ``walk``."""
+    """Rigid parts (centre in body coordinates, half extents, atlas table, texel density) moving along ``walk``
+    (a walker, or a car in a street)."""
 
-    walk: EllipseWalk
+    walk: EllipseWalk | LineWalk
     centres: tuple[np.ndarray, ...]
     halves: tuple[np.ndarray, ...]
     tables: tuple[np.ndarray, ...]
+    rhos: tuple[float | None, ...] = ()
 
     def boxes(self, t: float) -> list[Box]:
         rot, pos = self.walk.state(t)
-        parts = zip(self.centres, self.halves, self.tables)
-        return [Box(pos + rot @ c, rot, h, tab, dynamic=True) for c, h, tab in parts]
+        parts = zip(self.centres, self.halves, self.tables, self.rhos or (None,) * len(self.centres))
+        return [Box(pos + rot @ c, rot, h, tab, dynamic=True, rho=r) for c, h, tab, r in parts]
+
+
+def _rho(cfg: SynthConfig, spec) -> float | None:
+    """A box's own texel density for the caster (None: the scene's)."""
+    return None if spec.rho_scale == 1.0 else cfg.rho * spec.rho_scale
 
 
 class _CloseWalkFactory:
@@ -149,25 +161,34 @@ class Scene:
     def __init__(self, cfg: SynthConfig):
         self.cfg = cfg
         seed = cfg.seed
-        self.room = layout.room_size(seed)
-        self.camera = camera_motion(cfg.motion, seed, self.room)
         self.photometric = Photometric.of(cfg)
-        room_spec = layout.room_spec(seed, self.room)
-        furniture = layout.furniture_specs(seed, self.room)
-        walker_parts = [layout.walker_specs(seed, i) for i in range(cfg.n_movers)]
-        walks = self._walks(walker_parts)
+        street = cfg.motion in FORWARD_MOTIONS
+        if street:  # a camera travelling down a street (synth.street_world)
+            world = street_world(cfg)
+            self.room, self.street, self.camera = None, world.plan, world.camera
+            statics, walker_parts, walks = world.statics, world.mover_parts, world.paths
+        else:
+            self.room, self.street = layout.room_size(seed), None
+            self.camera = camera_motion(cfg.motion, seed, self.room)
+            statics = [layout.room_spec(seed, self.room), *layout.furniture_specs(seed, self.room)]
+            walker_parts = [layout.walker_specs(seed, i) for i in range(cfg.n_movers)]
+            walks = self._walks(walker_parts)
 
         builder = AtlasBuilder(cfg.rho)
-        for spec in [room_spec, *furniture]:
-            builder.add_box(spec.half, spec.materials, spec.shades, spec.seed, group=0)
+        for spec in statics:  # the first is the room (or the street's outer box), seen from inside
+            builder.add_box(spec.half, spec.materials, spec.shades, spec.seed, group=0, rho_scale=spec.rho_scale)
         for spec in (p for parts in walker_parts for p in parts):
-            builder.add_box(spec.half, spec.materials, spec.shades, spec.seed, group=1)
+            builder.add_box(spec.half, spec.materials, spec.shades, spec.seed, group=1, rho_scale=spec.rho_scale)
+        if street:
+            builder.add_panel(SKY_PANEL[0], SKY_PANEL[1], street_sky, (seed, 11, 2), group=2)
         self.atlas, tables = builder.build()
-        self.static_boxes = [Box(room_spec.centre, np.eye(3), room_spec.half, tables[0], inside=True)]
-        self.static_boxes += [Box(s.centre, s.rotation, s.half, t) for s, t in zip(furniture, tables[1:])]
-        rest = iter(tables[1 + len(furniture):])
+        sky = tables[-1][0] if street else None
+        self.static_boxes = [Box(s.centre, s.rotation, s.half, t, inside=i == 0, rho=_rho(cfg, s),
+                                 sky=sky if i == 0 else None) for i, (s, t) in enumerate(zip(statics, tables))]
+        rest = iter(tables[len(statics):])
         self.walkers = [Walker(walk, tuple(p.centre for p in parts), tuple(p.half for p in parts),
-                               tuple(next(rest) for _ in parts)) for walk, parts in zip(walks, walker_parts)]
+                               tuple(next(rest) for _ in parts), tuple(_rho(cfg, p) for p in parts))
+                        for walk, parts in zip(walks, walker_parts)]
         self.caster = RayCaster(cfg.intrinsics, cfg.width, cfg.height, cfg.rho)
 
     # -- time and poses -----------------------------------------------------
@@ -269,7 +290,10 @@ class Scene:
         depth = hits.depth
         depth[~np.isfinite(depth)] = 0.0
         linear = self._exposure(k, static, movers, pose_c2w, rgb, depth) if self.cfg.blur > 0 else None
-        return self.photometric.finish(k, rgb, linear), depth, hits.dynamic
+        out = self.photometric.finish(k, rgb, linear)
+        if self.cfg.grey:
+            out = cv2.cvtColor(cv2.cvtColor(out, cv2.COLOR_RGB2GRAY), cv2.COLOR_GRAY2RGB)
+        return out, depth, hits.dynamic
 
     def exposure_samples(self, k: int, depth: np.ndarray | None = None, static: bool = True, movers: bool = True,
                          pose_c2w: np.ndarray | None = None) -> np.ndarray:

@@ -1,6 +1,6 @@
-"""Write a synthetic sequence as a TUM RGB-D style folder.
+"""Write a synthetic sequence as a TUM RGB-D style folder, or as a KITTI odometry sequence.
 
-Layout::
+TUM layout (the default)::
 
     OUT/
       rgb/{t:.6f}.png      colour, 8-bit
@@ -11,6 +11,23 @@ Layout::
       calib.txt            "fx fy cx cy"
       synth.json           the SynthConfig used and the generator version
       video.mp4            optional (mp4v; falls back to video.avi with MJPG)
+
+KITTI layout (``layout="kitti"``, read back by :class:`~droidw_cli.io.datasets.KittiSource`)::
+
+    OUT/
+      image_0/NNNNNN.png   grey, single-channel 8-bit, when cfg.grey (KITTI's left grey camera)
+      image_2/NNNNNN.png   else colour, 8-bit (KITTI's left colour camera)
+      depth/NNNNNN.png     as in the TUM layout (×depth_scale), not a KITTI file
+      mask/NNNNNN.png      as in the TUM layout, not a KITTI file
+      times.txt            one timestamp in seconds a line, "%.12e" (exact to the microsecond)
+      calib.txt            P0: … P3: and Tr: lines, 12 numbers each ("%.12e"), see :func:`kitti_calib_text`
+      poses.txt            KITTI poses: the row-major top 3×4 of camera-to-world, relative to the first
+                           frame as in KITTI (the first line is the identity)
+      synth.json           as in the TUM layout, with "layout": "kitti"
+      video.mp4            optional, as in the TUM layout
+
+Only the left camera is rendered: the right cameras' matrices P1 and P3 are
+written for tools that expect four lines, with KITTI's 0.54 m baseline.
 
 The folder is written under a temporary name next to OUT and renamed at the
 end, so OUT is either complete or absent.  PNGs are encoded on a thread pool
@@ -38,6 +55,9 @@ from droidw_cli.synth.render import build_scene, render_sequence
 
 PNG_FAST = [cv2.IMWRITE_PNG_COMPRESSION, 1]
 MAX_IN_FLIGHT = 6
+LAYOUTS = ("tum", "kitti")
+#: metres between KITTI's left and right cameras, for the P1 / P3 lines of calib.txt
+KITTI_BASELINE = 0.54
 
 
 def encode_depth(depth: np.ndarray, cfg: SynthConfig) -> np.ndarray:
@@ -86,19 +106,37 @@ def _prepare_target(out_dir: Path, overwrite: bool) -> None:
     out_dir.parent.mkdir(parents=True, exist_ok=True)
 
 
+def kitti_calib_text(cfg: SynthConfig) -> str:
+    """A KITTI odometry ``calib.txt`` for ``cfg``'s camera.
+
+    P0 = P2 = K [I | 0] (the rendered left camera; KITTI's grey and colour
+    cameras sit 6 cm apart, the generator renders one), P1 = P3 = K [I | t]
+    with t = (−b, 0, 0), i.e. a last column (−fx·b, 0, 0), b = 0.54 m (right
+    cameras, not rendered), and ``Tr`` (KITTI's Velodyne-to-camera transform)
+    the identity: there is no laser scanner.
+    """
+    left = np.hstack([cfg.K, np.zeros((3, 1))])
+    right = left.copy()
+    right[0, 3] = -cfg.K[0, 0] * KITTI_BASELINE
+    rows = (("P0", left), ("P1", right), ("P2", left), ("P3", right), ("Tr", np.eye(4)[:3]))
+    return "".join(f"{name}: " + " ".join(f"{v:.12e}" for v in m.ravel()) + "\n" for name, m in rows)
+
+
 def write_sequence(cfg: SynthConfig, out_dir: str | Path, video: bool = False, progress: bool = True,
-                   overwrite: bool = False) -> Path:
-    """Render ``cfg`` and write the TUM-style folder ``out_dir``; returns its path.
+                   overwrite: bool = False, layout: str = "tum") -> Path:
+    """Render ``cfg`` and write the folder ``out_dir`` in ``layout`` (``tum`` or ``kitti``); returns its path.
 
     ``video`` also writes ``video.mp4`` (or ``video.avi``).  ``progress``
     shows a tqdm bar on stderr.  An existing non-empty ``out_dir`` is an
     error unless ``overwrite``.
     """
+    if layout not in LAYOUTS:
+        raise UserError(f"unknown layout {layout!r} (use one of {', '.join(LAYOUTS)})")
     out_dir = Path(out_dir).expanduser().absolute()
     _prepare_target(out_dir, overwrite)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".tmp", dir=out_dir.parent))
     try:
-        _write_into(cfg, tmp, video, progress)
+        _write_into(cfg, tmp, video, progress, layout)
         if out_dir.exists():
             old = out_dir.with_name(f".{out_dir.name}.old-{os.getpid()}")
             os.replace(out_dir, old)
@@ -112,8 +150,15 @@ def write_sequence(cfg: SynthConfig, out_dir: str | Path, video: bool = False, p
     return out_dir
 
 
-def _write_into(cfg: SynthConfig, folder: Path, video: bool, progress: bool) -> None:
-    for sub in ("rgb", "depth", "mask"):
+def _image_folder(cfg: SynthConfig, layout: str) -> str:
+    if layout == "tum":
+        return "rgb"
+    return "image_0" if cfg.grey else "image_2"
+
+
+def _write_into(cfg: SynthConfig, folder: Path, video: bool, progress: bool, layout: str) -> None:
+    images = _image_folder(cfg, layout)
+    for sub in (images, "depth", "mask"):
         (folder / sub).mkdir()
     scene = build_scene(cfg)
     frames = render_sequence(cfg, scene=scene)
@@ -129,7 +174,8 @@ def _write_into(cfg: SynthConfig, folder: Path, video: bool, progress: bool) -> 
     with ThreadPoolExecutor(max_workers=2) as pool, ThreadPoolExecutor(max_workers=1) as vpool:
         try:
             for frame in frames:
-                bgr = _submit(pool, pending, folder, frame, cfg)
+                name = f"{frame.timestamp:.6f}.png" if layout == "tum" else f"{frame.index:06d}.png"
+                bgr = _submit(pool, pending, folder, frame, cfg, images, name)
                 if vid is not None:
                     pending.append(vpool.submit(vid.write, bgr))
                 stamps.append(frame.timestamp)
@@ -146,22 +192,43 @@ def _write_into(cfg: SynthConfig, folder: Path, video: bool, progress: bool) -> 
                 vid.close()
             if progress:
                 frames.close()
+    if layout == "tum":
+        _write_tum_files(folder, cfg, stamps, poses)
+    else:
+        _write_kitti_files(folder, cfg, stamps, poses)
+    meta = {"generator": "droidw_cli.synth", "version": GENERATOR_VERSION, "config": dataclasses.asdict(cfg),
+            "walkers": len(scene.walkers)}
+    if layout != "tum":  # the TUM folder's synth.json stays as it always was
+        meta["layout"] = layout
+    atomic_write_text(folder / "synth.json", json.dumps(meta, indent=2) + "\n")
+
+
+def _write_tum_files(folder: Path, cfg: SynthConfig, stamps: list[float], poses: np.ndarray) -> None:
     atomic_write_text(folder / "rgb.txt", _list_text("rgb", stamps))
     atomic_write_text(folder / "depth.txt", _list_text("depth", stamps))
     atomic_write_text(folder / "mask.txt", _list_text("mask", stamps))
     write_trajectory(folder / "groundtruth.txt", Trajectory(np.array(stamps), poses))
     fx, fy, cx, cy = cfg.intrinsics
     atomic_write_text(folder / "calib.txt", f"{fx:.6f} {fy:.6f} {cx:.6f} {cy:.6f}\n")
-    meta = {"generator": "droidw_cli.synth", "version": GENERATOR_VERSION, "config": dataclasses.asdict(cfg),
-            "walkers": len(scene.walkers)}
-    atomic_write_text(folder / "synth.json", json.dumps(meta, indent=2) + "\n")
+
+
+def _write_kitti_files(folder: Path, cfg: SynthConfig, stamps: list[float], poses: np.ndarray) -> None:
+    atomic_write_text(folder / "times.txt", "".join(f"{t:.12e}\n" for t in stamps))
+    atomic_write_text(folder / "calib.txt", kitti_calib_text(cfg))
+    relative = np.linalg.inv(poses[0]) @ poses  # KITTI: poses in the first camera's frame
+    relative[0] = np.eye(4)  # exactly, not up to rounding
+    write_trajectory(folder / "poses.txt", Trajectory(np.array(stamps), relative), fmt="kitti")
 
 
 def _submit(pool: ThreadPoolExecutor, pending: list[Future], folder: Path, frame: SynthFrame,
-            cfg: SynthConfig) -> np.ndarray:
-    name = f"{frame.timestamp:.6f}.png"
+            cfg: SynthConfig, images: str, name: str) -> np.ndarray:
+    """Queue the frame's image, depth and mask PNGs; returns the BGR image (for the video).
+
+    ``images == "image_0"`` (KITTI grey): the single-channel image, which the
+    grey config renders as luma in all three channels."""
     bgr = np.ascontiguousarray(frame.rgb[..., ::-1])
-    pending.append(pool.submit(_write_png, folder / "rgb" / name, bgr))
+    image = np.ascontiguousarray(frame.rgb[..., 0]) if images == "image_0" else bgr
+    pending.append(pool.submit(_write_png, folder / images / name, image))
     pending.append(pool.submit(_write_png, folder / "depth" / name, encode_depth(frame.depth, cfg)))
     pending.append(pool.submit(_write_png, folder / "mask" / name, frame.mask.astype(np.uint8) * np.uint8(255)))
     return bgr
