@@ -122,16 +122,20 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
     cfg = dataclasses.replace(cfg, io=io)
     torch.manual_seed(cfg.seed)
     check_output_folder(out_dir)  # before the run, not after it
-    source = open_source(input_path, stride=io.stride, start=io.start, max_frames=io.max_frames, fps=io.fps)
+    # --calib (a file or auto) wins over a calibration found with the input; one droidw cannot read is then
+    # a warning, and without --calib an error
+    source = open_source(input_path, stride=io.stride, start=io.start, max_frames=io.max_frames, fps=io.fps,
+                         strict_calibration=calib is None)
     notes = open_depth(source, depth_scale) if io.use_depth else []
     if calib is None:  # the calibration that came with the data, else estimate it
         calibration = source.intrinsics_hint
         if calibration is not None:
             calibration.validate(source.size, "the input's calibration")
-    elif calib == "auto":
-        calibration = None
     else:
-        calibration = load_calibration(calib, image_size=source.size)
+        if source.calibration_problem is not None:
+            notes.append(f"ignored the input's calibration, --calib {calib} is used ({source.calibration_problem})")
+        calibration = None if calib == "auto" else load_calibration(calib, image_size=source.size,
+                                                                       camera=source.calibration_camera)
     choice = resolve_backend(backend)
     ba_backend = choice.backend
     if choice.requested == "auto":  # say which one auto picked, and why not the others
@@ -153,8 +157,10 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("droidw-run"), show_default=True,
               help="Output folder: traj.txt, keyframes.npz, calib.txt, run.json.")
 @click.option("--calib", default=None, metavar="FILE|auto",
-              help="Calibration file (fx fy cx cy [k1 k2 p1 p2 [k3]] or YAML), or 'auto' to estimate the focal "
-                   "length.  Default: the calibration found with the input (calib.txt, EuRoC sensor.yaml), else auto.")
+              help="Calibration file (fx fy cx cy [k1 k2 p1 p2 [k3]], YAML, or KITTI's calib.txt: P0, P2 when "
+                   "image_2 is read), or 'auto' to estimate the focal length; it wins over a calibration found "
+                   "with the input.  Default: the calibration found with the input (calib.txt, EuRoC sensor.yaml, "
+                   "KITTI calib.txt), else auto.")
 @click.option("--backend", default="auto", show_default=True,
               help="BA backend: auto (cuda when it is available and builds, else cpu; stderr and run.json "
                    "say which), cpu, cuda (see `droidw backends`).")
@@ -171,7 +177,7 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def track(input_path, out_dir, calib, backend, config_name, overrides, depth, depth_scale, stride, start, max_frames,
           quiet):
-    """Track INPUT (a video, an image folder, a TUM/Bonn or EuRoC folder).
+    """Track INPUT (a video, an image folder, a TUM/Bonn, EuRoC or KITTI odometry folder).
 
     Writes a camera-to-world pose for every input frame (TUM format, the
     input's own timestamps) plus the keyframes' depth and uncertainty.
@@ -182,6 +188,7 @@ def track(input_path, out_dir, calib, backend, config_name, overrides, depth, de
       droidw track rgbd_dataset_freiburg3_walking_xyz/ --calib calib.txt --config tum --out run/
       droidw track rgbd_dataset_freiburg3_walking_xyz/ --calib calib.txt --depth --out run-rgbd/
       droidw track frames/ --set uncertainty.enable=false --out baseline/
+      droidw track kitti/sequences/00/ --out run-00/
     """
     progress = not quiet and sys.stderr.isatty()
     result, paths = run_track(input_path, out_dir, calib, backend, config_name, overrides, stride, start,

@@ -1,6 +1,6 @@
 """Pinhole camera calibration: reading, validating and writing.
 
-Two file formats are read:
+Three file formats are read (:data:`READABLE_FORMATS` says so in error messages):
 
 * **text** — one line ``fx fy cx cy [k1 k2 p1 p2 [k3]]`` (whitespace or commas,
   ``#`` comments allowed).  This is also what :func:`write_calibration` writes.
@@ -8,6 +8,12 @@ Two file formats are read:
   ORB-SLAM files) or ``intrinsics: [fx, fy, cx, cy]`` (EuRoC ``sensor.yaml``),
   with optional distortion as ``distortion: [...]``,
   ``distortion_coefficients: [...]`` or keys ``k1 k2 p1 p2 [k3]``.
+* **KITTI odometry** ``calib.txt`` — lines ``P0: …`` to ``P3: …`` (and
+  ``Tr: …``), each a row-major 3×4 matrix.  The rectified projection of camera
+  i is P_i = K [I | t_i], so fx = P[0,0], fy = P[1,1], cx = P[0,2],
+  cy = P[1,2]; the images are rectified, hence no distortion.  Camera 0 (the
+  left grey camera, ``image_0``) is read unless another is asked for (a
+  KITTI source reading ``image_2`` asks for P2).
 
 Distortion is OpenCV's radial-tangential model (k1, k2, p1, p2[, k3]).  It acts
 on normalised coordinates, so resizing or cropping the image changes only
@@ -34,6 +40,10 @@ from droidw_cli.geometry.camera import resize_crop_intrinsics, working_size
 _DISTORTION_LENGTHS = (0, 4, 5)
 _RADTAN_NAMES = ("radial-tangential", "radtan", "plumb_bob", "pinhole-radtan")
 _YAML_SUFFIXES = (".yaml", ".yml")
+_KITTI_LINE = re.compile(r"^\s*P[0-3]\s*:", re.M)
+#: the formats load_calibration reads, for error messages
+READABLE_FORMATS = ("one line 'fx fy cx cy [k1 k2 p1 p2 [k3]]', YAML (fx fy cx cy, or intrinsics: [fx, fy, cx, cy]) "
+                    "or KITTI's calib.txt (P0: … P3: …)")
 #: plausible focal lengths, × the image's larger side: fields of view from about 169° down to about 0.6°
 FOCAL_RANGE = (0.05, 100.0)
 #: at most this ratio between fx and fy (pixels are close to square)
@@ -161,7 +171,8 @@ def _parse_text(text: str, where: str) -> list[float]:
     if not lines:
         raise InputError(f"{where}: the file holds no numbers")
     if len(lines) > 1:
-        raise InputError(f"{where}: expected one line 'fx fy cx cy [k1 k2 p1 p2 [k3]]', got {len(lines)} lines")
+        raise InputError(f"{where}: expected one line 'fx fy cx cy [k1 k2 p1 p2 [k3]]' (or YAML, or KITTI's "
+                         f"P0: … lines), got {len(lines)} lines")
     out = []
     for tok in re.split(r"[,\s]+", lines[0].strip(", \t")):
         try:
@@ -223,12 +234,45 @@ def _parse_yaml(text: str, where: str) -> tuple[list[float], list[float]]:
     return k, dist
 
 
-def load_calibration(path: str | Path, image_size: tuple[int, int] | None = None) -> Calibration | None:
-    """Read a calibration file (text or YAML, see the module docstring).
+def _parse_kitti(text: str, where: str, camera: int) -> list[float]:
+    """fx fy cx cy from the line ``P<camera>:`` of a KITTI calib.txt (see the module docstring)."""
+    rows: dict[str, list[float]] = {}
+    for lineno, line in enumerate(text.splitlines(), 1):
+        s = line.strip()
+        if not s:
+            continue
+        name, sep, rest = s.partition(":")
+        try:
+            if not sep:
+                raise ValueError
+            rows[name.strip()] = [float(v) for v in rest.split()]
+        except ValueError:
+            raise InputError(f"{where}:{lineno}: expected 'NAME: numbers' as in KITTI's calib.txt, "
+                             f"got {s[:60]!r}") from None
+    key = f"P{camera}"
+    if key not in rows:
+        raise InputError(f"{where}: no {key} line (the projection matrix of camera {camera}, image_{camera})")
+    if len(rows[key]) != 12:
+        raise InputError(f"{where}: {key} needs 12 numbers (a 3×4 matrix, row-major), got {len(rows[key])}")
+    p = np.array(rows[key]).reshape(3, 4)
+    if not np.isfinite(p).all():
+        raise InputError(f"{where}: {key} holds a value that is not a finite number")
+    fx = p[0, 0]
+    off = np.abs([p[0, 1], p[1, 0], p[2, 0], p[2, 1], p[2, 2] - 1.0]) * np.array([1.0, 1.0, fx, fx, fx])
+    if not fx > 0 or off.max() > 1e-6 * fx:
+        raise InputError(f"{where}: {key} is not a rectified pinhole projection [fx 0 cx *; 0 fy cy *; 0 0 1 *]")
+    return [float(fx), float(p[1, 1]), float(p[0, 2]), float(p[1, 2])]
+
+
+def load_calibration(path: str | Path, image_size: tuple[int, int] | None = None,
+                     camera: int = 0) -> Calibration | None:
+    """Read a calibration file (text, YAML or KITTI, see the module docstring).
 
     ``path == "auto"`` returns ``None``: tracking estimates the intrinsics.
     With ``image_size = (H, W)`` the principal point is checked to lie in the
-    image.  Every problem raises :class:`InputError` naming the file.
+    image.  ``camera`` picks the ``P<camera>`` line of a KITTI calib.txt (other
+    formats hold one camera).  Every problem raises :class:`InputError`
+    naming the file.
     """
     if isinstance(path, str) and path.strip().lower() == "auto":
         return None
@@ -240,6 +284,8 @@ def load_calibration(path: str | Path, image_size: tuple[int, int] | None = None
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{where}: cannot read ({exc})") from None
+    if _KITTI_LINE.search(text):
+        return _build(_parse_kitti(text, where, camera), [], where, image_size)
     is_yaml = path.suffix.lower() in _YAML_SUFFIXES or re.search(r"^\s*[A-Za-z_][\w.]*\s*:", text, re.M) is not None
     if is_yaml:
         k, dist = _parse_yaml(text, where)

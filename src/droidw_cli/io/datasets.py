@@ -11,18 +11,34 @@ EuRoC
     ``cam0/data.csv`` lists ``timestamp [ns], filename`` for ``cam0/data/``.
     Grey images are expanded to three RGB channels.  ``cam0/sensor.yaml``
     (``intrinsics: [fu, fv, cu, cv]``, ``distortion_coefficients``) is the hint.
+
+KITTI odometry
+    A sequence folder holds ``image_0/`` (left grey camera) and/or
+    ``image_2/`` (left colour camera) with ``000000.png, 000001.png, …``,
+    ``times.txt`` (one timestamp in seconds a line, one line per image) and
+    ``calib.txt`` (``P0:`` … ``P3:`` projection matrices, see
+    :mod:`droidw_cli.io.calibration`).  When both image folders exist
+    ``image_0`` is read: the odometry benchmark's poses are those of the left
+    grey camera.  Passing ``image_0`` (or ``image_2``) itself reads that
+    camera, when its parent has ``times.txt``.  The hint is the ``P`` line of
+    the camera read (P0 for image_0, P2 for image_2); KITTI always ships
+    calib.txt, so without it ``droidw track`` needs ``--calib``.  Grey images
+    are expanded to three RGB channels.  Other folders of the layout
+    (``image_1``, ``depth/`` written by ``droidw synth --layout kitti``) are
+    not read.
 """
 
 from __future__ import annotations
 
-import warnings
+import math
+import re
 from pathlib import Path
 
 import numpy as np
 
 from droidw_cli.errors import InputError
 from droidw_cli.io.frames import Selection
-from droidw_cli.io.sources import Entry, ListSource, find_hint
+from droidw_cli.io.sources import Entry, ListSource, find_calibration_file, list_images, natural_key
 
 TUM_MAX_DT = 0.02  # seconds
 
@@ -81,7 +97,7 @@ class TumRgbdSource(ListSource):
         order = np.argsort(rgb_t, kind="stable")
         entries = [Entry(float(rgb_t[i]), folder / rgb_names[i], depth_paths[i]) for i in order]
         super().__init__(folder, selection, fps, entries)
-        self.intrinsics_hint = find_hint(folder, self.size)
+        self.calibration_file = find_calibration_file(folder)
 
 
 def find_euroc_cam(path: Path) -> Path | None:
@@ -103,15 +119,64 @@ class EurocSource(ListSource):
         entries = [Entry(float(stamps[i]) / 1e9, cam / "data" / names[i]) for i in order]
         super().__init__(cam, selection, fps, entries)
         self.name = name or (cam.parent.parent.name if cam.parent.name == "mav0" else cam.name)
-        self.intrinsics_hint = self._hint(cam / "sensor.yaml")
+        yaml_path = cam / "sensor.yaml"
+        self.calibration_file = yaml_path if yaml_path.is_file() else None
 
-    def _hint(self, yaml_path: Path):
-        from droidw_cli.io.calibration import load_calibration
 
-        if not yaml_path.is_file():
-            return None
+#: KITTI cameras looked for in a sequence folder, in order of preference (left grey, left colour)
+KITTI_CAMERAS = (0, 2)
+_KITTI_IMAGE_DIR = re.compile(r"image_([0-3])")
+
+
+def find_kitti(path: Path) -> tuple[Path, int] | None:
+    """(sequence folder, camera) if ``path`` is a KITTI odometry sequence, or its ``image_N`` folder with
+    ``times.txt`` in the parent; else None."""
+    for cam in KITTI_CAMERAS:
+        if (path / f"image_{cam}").is_dir():
+            return path, cam
+    m = _KITTI_IMAGE_DIR.fullmatch(path.name)
+    if m is not None and (path.parent / "times.txt").is_file():
+        return path.parent, int(m.group(1))
+    return None
+
+
+def read_times(path: Path) -> np.ndarray:
+    """KITTI ``times.txt``: one timestamp in seconds a line (blank lines skipped), strictly increasing."""
+    if not path.is_file():
+        raise InputError(f"{path.parent}: a KITTI sequence needs times.txt (one timestamp in seconds a line)")
+    stamps: list[float] = []
+    for lineno, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+        s = line.strip()
+        if not s:
+            continue
         try:
-            return load_calibration(yaml_path, self.size)
-        except InputError as exc:
-            warnings.warn(f"ignoring the EuRoC calibration: {exc}", stacklevel=3)
-            return None
+            t = float(s)
+        except ValueError:
+            t = math.nan
+        if not math.isfinite(t):
+            raise InputError(f"{path}:{lineno}: expected one timestamp in seconds, got {s[:60]!r}")
+        if stamps and t <= stamps[-1]:
+            raise InputError(f"{path}:{lineno}: timestamp {s} does not increase (previous {stamps[-1]:g})")
+        stamps.append(t)
+    if not stamps:
+        raise InputError(f"{path}: holds no timestamps")
+    return np.array(stamps, dtype=np.float64)
+
+
+class KittiSource(ListSource):
+    """A KITTI odometry sequence: ``image_<camera>/`` images, ``times.txt`` timestamps, ``calib.txt`` P<camera>."""
+
+    calibration_expected = "a KITTI odometry sequence"
+
+    def __init__(self, folder: Path, camera: int, selection: Selection, fps: float) -> None:
+        images = folder / f"image_{camera}"
+        files = sorted(list_images(images), key=lambda f: natural_key(f.name))
+        if not files:
+            raise InputError(f"{images}: no images in this KITTI image folder")
+        stamps = read_times(folder / "times.txt")
+        if len(stamps) != len(files):
+            raise InputError(f"{folder / 'times.txt'}: {len(stamps)} timestamps for {len(files)} images in "
+                             f"{images.name}/ (KITTI has one line per image)")
+        super().__init__(folder, selection, fps, [Entry(float(t), f) for t, f in zip(stamps, files)])
+        self.calibration_camera = camera
+        self.calibration_file = folder / "calib.txt" if (folder / "calib.txt").is_file() else None

@@ -10,12 +10,21 @@ webm, mpg, mpeg, wmv)
 folder with ``rgb.txt`` (or that file)    :class:`~droidw_cli.io.datasets.TumRgbdSource`
                                           (TUM / Bonn RGB-D)
 EuRoC root, ``mav0`` or ``mav0/cam0``     :class:`~droidw_cli.io.datasets.EurocSource`
+KITTI odometry sequence (``image_0/`` or  :class:`~droidw_cli.io.datasets.KittiSource`
+``image_2/``, ``times.txt``, ``calib.txt``)
+or its ``image_0`` / ``image_2`` folder
 any other folder of jpg/png/bmp/tif       :class:`~droidw_cli.io.sources.ImageFolderSource`
 ========================================  ====================================
 
 Every source yields :class:`Frame` objects one at a time (memory stays
 bounded), and ``iter(source)`` can be called again: each call reopens the
 data, so a second pass (the trajectory filler) sees the same frames.
+
+Calibration found with the data (``calib.txt``, EuRoC ``sensor.yaml``, KITTI
+``calib.txt``) becomes ``source.intrinsics_hint``.  By default a file that
+cannot be read is an error naming it and the formats droidw reads; with
+``strict_calibration=False`` (``droidw track --calib FILE``, where the given
+file wins) it is kept as ``source.calibration_problem`` for a warning instead.
 
 Selection: raw frames ``start, start + stride, …`` are kept, at most
 ``max_frames`` of them (0 = all).  ``Frame.index`` is the position in that
@@ -186,6 +195,14 @@ class FrameSource(ABC):
     size: tuple[int, int]
     intrinsics_hint = None
     fps: float
+    #: the calibration file found with the data (read by open_source into intrinsics_hint), or None
+    calibration_file: Path | None = None
+    #: which camera's projection a KITTI calib.txt gives (P0, P2, ...); other formats hold one camera
+    calibration_camera: int = 0
+    #: set (to the layout's name) where the layout always ships a calibration: without one it is an error
+    calibration_expected: str | None = None
+    #: why the calibration found with the data was not used (strict_calibration=False), or None
+    calibration_problem: str | None = None
 
     def __init__(self, path: Path, selection: Selection, fps: float) -> None:
         self.path = Path(path)
@@ -214,15 +231,49 @@ def _check_nonempty(source: FrameSource) -> FrameSource:
     return source
 
 
-def open_source(path: str | Path, *, stride: int = 1, start: int = 0, max_frames: int = 0, fps: float = 30.0) -> FrameSource:
-    """Open a video, image folder, TUM/Bonn RGB-D folder or EuRoC sequence (detected from ``path``).
+def read_calibration_hint(source: FrameSource, strict: bool = True) -> FrameSource:
+    """Read ``source.calibration_file`` into ``source.intrinsics_hint`` (checked against ``source.size``).
+
+    A file that cannot be read raises :class:`InputError` naming it and the
+    formats droidw reads when ``strict``; otherwise the hint stays None and
+    the reason goes to ``source.calibration_problem``.  A layout that always
+    ships a calibration (``calibration_expected``) without one is an error
+    only when ``strict``.
+    """
+    from droidw_cli.io.calibration import READABLE_FORMATS, load_calibration
+
+    path = source.calibration_file
+    if path is None:
+        if source.calibration_expected and strict:
+            raise InputError(f"{source.path}: no calib.txt, which {source.calibration_expected} always has; add "
+                             f"it, or pass --calib FILE or --calib auto")
+        return source
+    try:
+        source.intrinsics_hint = load_calibration(path, source.size, camera=source.calibration_camera)
+    except InputError as exc:
+        if strict:
+            raise InputError(f"{exc} (the calibration found with the input; droidw reads {READABLE_FORMATS}); "
+                             f"pass --calib FILE or --calib auto to track without it") from None
+        source.calibration_problem = str(exc)
+    return source
+
+
+def open_source(path: str | Path, *, stride: int = 1, start: int = 0, max_frames: int = 0, fps: float = 30.0,
+                strict_calibration: bool = True) -> FrameSource:
+    """Open a video, image folder, TUM/Bonn RGB-D folder, EuRoC or KITTI sequence (detected from ``path``).
 
     ``fps`` is used for timestamps when the data has none (image folders
     without timestamp names, videos that report no frame rate).  Raises
     :class:`InputError` for a missing path, an unknown file type, an empty
-    folder or an unreadable video, and when the selection is empty.
+    folder or an unreadable video, and when the selection is empty.  The
+    calibration found with the data is read by :func:`read_calibration_hint`
+    (``strict_calibration``: its problems are errors, else warnings).
     """
-    from droidw_cli.io.datasets import EurocSource, TumRgbdSource, find_euroc_cam
+    return read_calibration_hint(_open(path, stride, start, max_frames, fps), strict_calibration)
+
+
+def _open(path: str | Path, stride: int, start: int, max_frames: int, fps: float) -> FrameSource:
+    from droidw_cli.io.datasets import EurocSource, KittiSource, TumRgbdSource, find_euroc_cam, find_kitti
     from droidw_cli.io.sources import ImageFolderSource, VideoSource
 
     sel = Selection(stride=stride, start=start, max_frames=max_frames)
@@ -247,4 +298,7 @@ def open_source(path: str | Path, *, stride: int = 1, start: int = 0, max_frames
     cam = find_euroc_cam(p)
     if cam is not None:
         return _check_nonempty(EurocSource(cam, sel, fps))
+    kitti = find_kitti(p)
+    if kitti is not None:
+        return _check_nonempty(KittiSource(*kitti, sel, fps))
     return _check_nonempty(ImageFolderSource(p, sel, fps))

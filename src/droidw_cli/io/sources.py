@@ -57,13 +57,15 @@ def stem_timestamps(stems: Sequence[str]) -> np.ndarray | None:
     return None
 
 
-def find_hint(folder: Path, size: tuple[int, int]):
-    """``calib.txt`` in ``folder`` as a Calibration checked against ``size``, or None."""
-    from droidw_cli.io.calibration import load_calibration
+#: calibration files looked for in an input folder, in this order
+CALIBRATION_NAMES = ("calib.txt", "calibration.txt", "calib.yaml")
 
-    for name in ("calib.txt", "calibration.txt", "calib.yaml"):
+
+def find_calibration_file(folder: Path) -> Path | None:
+    """The first of :data:`CALIBRATION_NAMES` in ``folder``, or None (read by ``open_source``)."""
+    for name in CALIBRATION_NAMES:
         if (folder / name).is_file():
-            return load_calibration(folder / name, size)
+            return folder / name
     return None
 
 
@@ -158,7 +160,7 @@ class ImageFolderSource(ListSource):
             times = np.arange(len(files), dtype=np.float64) / fps
         self.timestamps_from_names = stamps is not None
         super().__init__(folder, selection, fps, [Entry(float(t), f) for t, f in zip(times, files)])
-        self.intrinsics_hint = find_hint(folder, self.size)
+        self.calibration_file = find_calibration_file(folder)
 
 
 class VideoSource(FrameSource):
