@@ -23,8 +23,12 @@ FORMAT_CHOICES = click.Choice(["auto", "tum", "kitti", "euroc"], case_sensitive=
 @click.option("--format", "fmt", type=FORMAT_CHOICES, default="auto", show_default=True,
               help="Format of the estimate (and of the ground truth unless --gt-format is given).")
 @click.option("--gt-format", type=FORMAT_CHOICES, default=None, help="Format of the ground truth.")
-@click.option("--gt-times", type=str, default=None, metavar="FILE", help="Timestamps for a KITTI ground truth.")
-@click.option("--est-times", type=str, default=None, metavar="FILE", help="Timestamps for a KITTI estimate.")
+@click.option("--gt-times", type=str, default=None, metavar="FILE",
+              help="Timestamps for a KITTI ground truth [default, against a timestamped estimate: times.txt in "
+                   "its folder, if any].")
+@click.option("--est-times", type=str, default=None, metavar="FILE",
+              help="Timestamps for a KITTI estimate [default, against a timestamped ground truth: times.txt in "
+                   "its folder, if any].")
 @click.option("--rpe", "rpe_delta", type=click.IntRange(min=1), default=None, metavar="DELTA",
               help="Also report the translational RPE over pose pairs DELTA matched frames apart.")
 @click.option("--plot", "plot_path", type=str, default=None, metavar="PNG",
@@ -39,13 +43,16 @@ def evaluate(gt_path: str, est_path: str, align: str, max_diff: float, t_offset:
 
     The association, alignment and metrics are evo's (the same numbers as
     `evo_ape tum GT EST -a [-s]`).  KITTI files carry no timestamps: two KITTI
-    files are paired by index, or give --gt-times / --est-times.
+    files are paired by index, or give --gt-times / --est-times; a KITTI file
+    compared with a timestamped one takes times.txt from its own folder (as
+    `droidw synth --layout kitti` writes it).
 
     \b
     Examples:
       droidw eval --gt groundtruth.txt --est run/
       droidw eval --gt gt.csv --est traj.txt --align se3 --rpe 10 --plot top.png
       droidw eval --gt KITTI_00_gt.txt --est KITTI_00_ORB.txt --json
+      droidw eval --gt seq-kitti/poses.txt --est run/
       droidw eval --gt groundtruth.txt --est run/ --save-results droidw.zip && evo_res droidw.zip other.zip
     """
     from droidw_cli.eval import inputs
@@ -59,6 +66,8 @@ def evaluate(gt_path: str, est_path: str, align: str, max_diff: float, t_offset:
     fmt = fmt.lower()
     gt = inputs.load(gt_path, (gt_format or fmt).lower(), gt_times, role="gt")
     est = inputs.load(inputs.resolve_estimate_path(est_path), fmt, est_times, role="est")
+    gt = inputs.with_folder_times(gt, est, "--gt-times")
+    est = inputs.with_folder_times(est, gt, "--est-times")
     by_index = inputs.pairing_by_index(gt, est)
     ate = evaluate_ate(gt.traj, est.traj, align, max_diff, offset=t_offset, by_index=by_index)
     rpe = evaluate_rpe(gt.traj, est.traj, ate, rpe_delta) if rpe_delta is not None else None

@@ -43,22 +43,29 @@ def _parse_size(ctx, param, value: str | None) -> tuple[int, int] | None:
               help="Slow exposure gain change, e.g. 0.1 = ±10 % [0].")
 @click.option("--static", "static", is_flag=True, help="No movers: a static scene.")
 @click.option("--apart", is_flag=True, help="Walkers keep 0.7 m apart (by default they may walk through each other).")
+@click.option("--layout", type=click.Choice(["tum", "kitti"]), default="tum", show_default=True,
+              help="Folder layout: TUM RGB-D (rgb.txt, groundtruth.txt) or KITTI odometry (image_0/ or image_2/, "
+                   "times.txt, calib.txt, poses.txt).")
+@click.option("--grey", is_flag=True, help="Grey images (luma); the KITTI layout writes them to image_0/.")
 @click.option("--video", is_flag=True, help="Also write video.mp4 (video.avi if mp4v is unavailable).")
 @click.option("--overwrite", is_flag=True, help="Replace OUT_DIR if it exists and is not empty.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar or summary.")
 def synth(out_dir: str, preset: str, frames: int | None, seed: int, movers: int | None, size, fps: float | None,
           noise: float | None, motion: str | None, blur: float | None, jpeg: int | None, gain_drift: float | None,
-          static: bool, apart: bool, video: bool, overwrite: bool, quiet: bool) -> None:
-    """Generate a synthetic room with walking people and write it as a TUM-style folder.
+          static: bool, apart: bool, layout: str, grey: bool, video: bool, overwrite: bool, quiet: bool) -> None:
+    """Generate a synthetic room with walking people and write it as a TUM-style (or KITTI) folder.
 
     \b
     OUT_DIR gets rgb/, depth/ (16-bit, ×5000), mask/ (255 = moving), rgb.txt,
     depth.txt, groundtruth.txt (camera-to-world, TUM), calib.txt (fx fy cx cy).
+    With --layout kitti: image_0/ (--grey) or image_2/, depth/, mask/,
+    times.txt, calib.txt (P0-P3), poses.txt (KITTI, relative to frame 0).
     Presets walk, walk-static, wobble, rotate, stopgo and fixed add camera
     motions, motion blur, noise, JPEG and gain drift (realistic 640x480).
     Examples:
       droidw synth seq/ --frames 300 --movers 3 --video
       droidw synth seq/ --preset rotate --blur 0.3
+      droidw synth seq-kitti/ --layout kitti --grey
     """
     from droidw_cli.synth import SynthConfig, write_sequence
 
@@ -77,6 +84,8 @@ def synth(out_dir: str, preset: str, frames: int | None, seed: int, movers: int 
             overrides[key] = value
     if apart:
         overrides["apart"] = True
+    if grey:
+        overrides["grey"] = True
     if static:
         overrides["static"] = True
     elif movers:
@@ -86,7 +95,7 @@ def synth(out_dir: str, preset: str, frames: int | None, seed: int, movers: int 
     except ValueError as exc:
         raise UserError(f"synth: {exc}") from None
     start = time.perf_counter()
-    path = write_sequence(cfg, out_dir, video=video, progress=not quiet, overwrite=overwrite)
+    path = write_sequence(cfg, out_dir, video=video, progress=not quiet, overwrite=overwrite, layout=layout)
     elapsed = time.perf_counter() - start
     if not quiet:
         click.echo(f"wrote {cfg.frames} frames ({cfg.width}x{cfg.height}, {cfg.n_movers} movers, {cfg.motion} camera, "

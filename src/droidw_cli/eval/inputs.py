@@ -9,6 +9,8 @@ from droidw_cli.errors import InputError, UserError
 from droidw_cli.io.trajectory import Trajectory, detect_format, read_kitti, read_trajectory
 
 RUN_TRAJECTORY = "traj.txt"
+#: the timestamps file of a KITTI sequence folder (one line per pose), as ``droidw synth --layout kitti`` writes
+KITTI_TIMES = "times.txt"
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +46,21 @@ def load(path: str | Path, fmt: str = "auto", times: str | Path | None = None, r
     if times is not None:
         raise UserError(f"--{role}-times only applies to KITTI files, but {p} is {resolved.upper()}")
     return LoadedTrajectory(read_trajectory(p, resolved), p, resolved, True)
+
+
+def with_folder_times(loaded: LoadedTrajectory, other: LoadedTrajectory, flag: str) -> LoadedTrajectory:
+    """A KITTI trajectory without timestamps, compared with a timestamped ``other``, takes its times from
+    :data:`KITTI_TIMES` in its own folder when there is one (``droidw synth --layout kitti`` writes
+    ``poses.txt`` beside it); unchanged otherwise.  A times file whose length differs is an error."""
+    times = loaded.path.parent / KITTI_TIMES
+    if loaded.has_timestamps or not other.has_timestamps or not times.is_file():
+        return loaded
+    try:
+        traj = read_kitti(loaded.path, times)
+    except InputError as exc:
+        raise InputError(f"{exc} (read as the times of {loaded.path.name}, which has none; give them with "
+                         f"{flag} FILE)") from None
+    return LoadedTrajectory(traj, loaded.path, loaded.fmt, True)
 
 
 def pairing_by_index(gt: LoadedTrajectory, est: LoadedTrajectory) -> bool:
