@@ -8,7 +8,7 @@ import pytest
 
 from droidw_cli.config import CorrespondenceConfig
 from droidw_cli.correspondence import DISCorrespondence, grid_coordinates
-from droidw_cli.correspondence.dis import calc_deep, create_dis, dis_levels, dis_objects, padded_size
+from droidw_cli.correspondence.dis import calc_deep, calc_warped, create_dis, dis_levels, dis_objects, padded_size
 from droidw_cli.errors import ConfigError
 
 SHIFT = 44  # px: found from DIS MEDIUM's level 4, lost from its level 3 (on these textures)
@@ -76,13 +76,45 @@ def test_each_level_more_finds_a_larger_shift():
     assert errors[0] > 20 and errors[1] < 0.5
 
 
-def test_calc_deep_is_dis_itself_when_deep_enough_or_started():
+def test_calc_deep_is_dis_itself_when_deep_enough_and_warps_by_a_start():
     gray_i, gray_j = shifted_pair(272, 360, dx=6)
     assert np.array_equal(calc_deep(dis_objects("medium"), gray_i, gray_j, None, 3),
                           create_dis("medium").calc(gray_i, gray_j, None))
-    start = np.full((272, 360, 2), 5.0, np.float32)
-    seeded = create_dis("medium").calc(gray_i, gray_j, start.copy())
-    assert np.array_equal(calc_deep(dis_objects("medium"), gray_i, gray_j, start.copy(), 5), seeded)
+    small = np.full((272, 360, 2), 5.0, np.float32)  # mean |f₀| under WARP_MIN of the diagonal: DIS's initial flow
+    assert np.array_equal(calc_deep(dis_objects("medium"), gray_i, gray_j, small.copy(), 5),
+                          dis_objects("medium")("seeded").calc(gray_i, gray_j, small.copy()))
+    gray_i, gray_j = shifted_pair(272, 360, dx=14)
+    start = np.full((272, 360, 2), 12.0, np.float32)  # over it: warped out
+    started = calc_deep(dis_objects("medium"), gray_i, gray_j, start.copy(), 5)
+    assert np.array_equal(started, calc_warped(dis_objects("medium"), gray_i, gray_j, start, 5))
+    assert shift_error(started, dx=14) < 0.2
+
+
+def zoomed_pair(h: int, w: int, zoom: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A texture and the same texture magnified by ``zoom`` about the image centre (a camera moving towards a
+    wall), and the true flow from the first to the second."""
+    big_i, _ = shifted_pair(h, w, dx=0, seed=1)
+    centre = np.float32([(w - 1) / 2, (h - 1) / 2])
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float32)
+    src = np.stack([xs, ys], -1)
+    flow = (src - centre) * np.float32(zoom - 1)  # x → c + zoom (x − c)
+    inv = centre + (src - centre) / np.float32(zoom)  # the second image samples the first at c + (x − c) / zoom
+    gray_j = cv2.remap(big_i, inv[..., 0], inv[..., 1], cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT)
+    return big_i, gray_j, flow
+
+
+def test_a_start_is_kept_under_a_strong_expansion():
+    """A 30 % zoom (up to 50 px at the borders): DIS handed the exact flow as its initial flow searches again at
+    every level and loses much of it; warped by the start, it only has to confirm it."""
+    gray_i, gray_j, truth = zoomed_pair(272, 360, 1.3)
+    inner = (slice(40, -40), slice(50, -50))
+
+    def error(flow):
+        return float(np.median(np.linalg.norm(flow[inner] - truth[inner], axis=-1)))
+
+    seeded = create_dis("medium").calc(gray_i, gray_j, truth.copy())
+    warped = calc_deep(dis_objects("medium"), gray_i, gray_j, truth.copy(), 0)
+    assert error(warped) < 0.3 and error(warped) < 0.5 * error(seeded)
 
 
 def test_the_source_uses_the_deeper_pyramid_for_edges_filler_and_mean_flow():
