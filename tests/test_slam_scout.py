@@ -51,7 +51,7 @@ def test_scout_on_a_thread_decides_as_the_tracker_did():
     expected = _sequential(frames, initialise_at=3)
     calls = []
     scout = Scout(MotionFilter(MotionFilterConfig(max_gap=4)),
-                  prematch=lambda c, p: calls.append((c, p)) or ("pair", len(calls)))
+                  prematch=lambda c, p, start: calls.append((c, p)) or ("pair", len(calls)))
     scout.release()
     got, candidates, flagged = [], 0, []
     items = prefetched(scout.frames((_Frame(i), im, None) for i, im in enumerate(frames)), ahead=4)
@@ -76,7 +76,7 @@ def test_early_matches_wait_for_release_and_are_forgotten_once_passed():
     started = []
     gate = threading.Event()
 
-    def prematch(c, p):
+    def prematch(c, p, start):
         started.append(1)
         gate.wait(5)
         return "done"
@@ -109,7 +109,7 @@ def test_early_features_come_before_the_match_and_only_after_release():
     frames = _walk(30)
     order = []
     scout = Scout(MotionFilter(MotionFilterConfig(max_gap=2)),
-                  prematch=lambda c, p: order.append("match") or "m",
+                  prematch=lambda c, p, start: order.append("match") or "m",
                   prefeatures=lambda c: order.append("features") or c.mean())
     scout.taken(initialised=True)
     flagged = [f.index for f, _, _, kf in scout.frames((_Frame(i), im, None) for i, im in enumerate(frames)) if kf]

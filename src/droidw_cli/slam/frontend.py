@@ -68,8 +68,13 @@ from droidw_cli.slam.focal import clamp_focal, focal_observable
 from droidw_cli.slam.keyframes import KeyframeBuffer
 from droidw_cli.slam.optimizer import SharedState, run_window, window_state
 from droidw_cli.slam.parallax import homography_parallax
-from droidw_cli.slam.poses import extrapolate
+from droidw_cli.slam.poses import compose, extrapolate, interpolate
+from droidw_cli.slam.starts import adjacent_start
+from droidw_cli.slam.two_view import two_view
 
+#: the two-view model of initialisation spans keyframes 0 … TWO_VIEW_SPAN (slam/two_view.py; DIS needs no
+#: initial flow over two keyframe gaps)
+TWO_VIEW_SPAN = 2
 #: proximity edges are sought for the keyframes this close to the newest (DROID: t1 − 5)
 PROXIMITY_RECENT = 5
 #: :meth:`Frontend.uncertainty` computes the evidence maps of this many keyframes at a time (all 200
@@ -116,6 +121,9 @@ class Frontend:
         # early matches of adjacent pairs made on another thread (slam/scout.py's Scout: matched(frame i,
         # frame j) → match_adjacent's result or None, hold() while this frontend matches, release() after)
         self.early = None
+        # the motion filter's flows between consecutive candidates (the scout's start(frame, previous frame)):
+        # they start the match of adjacent pairs
+        self.starts = None
         # epipolar motion segmentation: (Sampson distance map, raw confidence) of the window's edges.
         # Not while the focal length is estimated: on lady-running with --calib auto the masks
         # flagged 27-41 % of the view (not only the runner) and the estimated fx fell from
@@ -155,18 +163,20 @@ class Frontend:
         self._match(pairs, use_prior=True, images=images)
 
     def _match(self, pairs: list[tuple[int, int]], use_prior: bool, images: dict[int, np.ndarray] | None = None) -> None:
-        """Compute and cache targets for the pairs not cached yet."""
+        """Compute and cache targets for the pairs not cached yet, each flow started as :mod:`droidw_cli.slam.starts`
+        says (``use_prior`` False: from the motion filter's flow only).  Both directions of a pair come from one
+        forward-backward call; an adjacent pair the scout matched early is taken from it."""
         images = self.images if images is None else images
         todo = [p for p in pairs if p not in self.cache]
         if not todo:
             return
-        init = [None] * len(todo)
-        if use_prior:
-            wide = [n for n, (i, j) in enumerate(todo) if abs(i - j) > 1]
-            if wide:
-                flow, valid = self._induced_flow([todo[n] for n in wide])
-                size = images[todo[wide[0]][0]].shape[:2]
-                for m, n in enumerate(wide):
+        size = images[todo[0][0]].shape[:2]
+        init = [self._adjacent_start(i, j, size) if abs(i - j) == 1 else None for i, j in todo]
+        if use_prior:  # wider pairs from the map; adjacent ones as the scout matches them (the same bytes)
+            prior = [n for n, (i, j) in enumerate(todo) if abs(i - j) > 1]
+            if prior:
+                flow, valid = self._induced_flow([todo[n] for n in prior])
+                for m, n in enumerate(prior):
                     init[n] = self.full_res_flow(flow[m], valid[m], size)
         first = dict(zip(todo, init))
         done: set[tuple[int, int]] = set()
@@ -175,7 +185,7 @@ class Frontend:
             if (i, j) in done:
                 continue
             both = (j, i) in first and (j, i) not in done  # both directions from one forward-backward pair
-            early = self._matched_early(i, j) if both and f0 is None else None
+            early = self._matched_early(i, j) if both and abs(i - j) == 1 else None
             if early is not None:
                 for key, (c, epipolar) in zip([(i, j), (j, i)], early):
                     self._store(key, c, epipolar)
@@ -198,13 +208,28 @@ class Frontend:
         if self._masking:
             self._mask_movers({i for i, _ in todo})
 
-    def match_adjacent(self, image_i: np.ndarray, image_j: np.ndarray, source=None) -> list[tuple[Correspondence, object]]:
-        """The pair (i, j), (j, i) as :meth:`_match` makes it without an initial flow (with the epipolar
-        maps when segmenting), every job on the calling thread, so that another thread may ask for it
-        (:mod:`droidw_cli.slam.scout`); ``source``: the correspondence source to use (default: the frontend's)."""
+    def match_adjacent(self, image_i: np.ndarray, image_j: np.ndarray, start: np.ndarray | None = None,
+                       source=None) -> list[tuple[Correspondence, object]]:
+        """The pair (i, j), (j, i) as :meth:`_match` makes it from the motion filter's flow j → i (``start``, half
+        size; :func:`~droidw_cli.slam.starts.adjacent_start`), with the epipolar maps when segmenting, every job on the calling thread,
+        so that another thread may ask for it (:mod:`droidw_cli.slam.scout`); ``source``: the correspondence
+        source to use (default: the frontend's)."""
         derive = _epipolar_of if self._segmenting else None
         source = self.correspondence if source is None else source
-        return source.match_all([MatchCall(image_i, image_j, None, True)], derive, serial=True)[0]
+        init = None if start is None else adjacent_start(start, image_i.shape[:2], invert=True)
+        return source.match_all([MatchCall(image_i, image_j, init, True)], derive, serial=True)[0]
+
+    def _adjacent_start(self, i: int, j: int, size: tuple[int, int]) -> np.ndarray | None:
+        """The start of pair (i, j) from the motion filter's flow between the two, when one was the other's
+        reference (``self.starts``, the scout); None otherwise."""
+        if self.starts is None:
+            return None
+        fi, fj = self.buffer.frame_index[i], self.buffer.frame_index[j]
+        later = self.starts.start(fi, fj)  # j → i
+        if later is not None:
+            return adjacent_start(later, size, invert=True)
+        earlier = self.starts.start(fj, fi)  # i → j
+        return None if earlier is None else adjacent_start(earlier, size, invert=False)
 
     def _matched_early(self, i: int, j: int) -> list[tuple[Correspondence, object]] | None:
         """The pair (i, j), (j, i) as :meth:`match_adjacent` made it on another thread (``self.early``),
@@ -339,17 +364,49 @@ class Frontend:
         n = len(buf)
         init_radius = max(3, f.radius)
         self.shared.iterations = 0  # the uncertainty warm-up (official: 8 unweighted iterations) counts from here
-        for m in range(2, n + 1):
+        start = self._two_view_start(init_radius)
+        for m in range(start, n + 1):
             if m >= 3:
                 buf.poses[m - 1] = extrapolate(buf.poses[m - 3], buf.poses[m - 2], 1.0)
                 prior = buf.depth_prior[m - 1] if buf.has_prior else None
-                buf.disps[m - 1] = seed_disparity(buf.disps[m - 2].median(), prior, buf.disps.shape[1:], buf.device)
+                moved = transfer_disparity(buf.poses[m - 2], buf.disps[m - 2], buf.poses[m - 1],
+                                           self.shared.intrinsics, self.params.min_depth)
+                buf.disps[m - 1] = seed_disparity(moved, prior, buf.disps.shape[1:], buf.device)
             pairs = graph.init_pairs(m, init_radius)
             self._match(pairs, use_prior=m >= 3)
             self._optimise(0, m, pairs, 4 if m < n else f.init_iters, focal=False)
         self._optimise(0, n, graph.init_pairs(n, init_radius), f.iters1 + f.iters2, focal=False)
         self._detect(list(range(n)))
         self.initialised = True
+
+    def _two_view_start(self, radius: int) -> int:
+        """Start the first ``TWO_VIEW_SPAN`` + 1 keyframes from a two-view model (:mod:`droidw_cli.slam.two_view`)
+        and optimise them; returns the keyframe count the incremental initialisation goes on from (2, the flat
+        start, where the pair does not determine a model, or in RGB-D mode, whose sensor depth does)."""
+        buf = self.buffer
+        m = min(len(buf) - 1, TWO_VIEW_SPAN)
+        if buf.has_prior or m < 1:
+            return 2
+        derive = _epipolar_of if self._segmenting else None
+        matched = self.correspondence.match_all([MatchCall(self.images[0], self.images[m], None, True)], derive)[0]
+        model = two_view(matched[0][0].target, matched[0][0].weight, self.shared.intrinsics)
+        if model is None:  # nothing cached: the flat start goes on as if this was not tried
+            return 2
+        for key, (c, epipolar) in zip([(0, m), (m, 0)], matched):
+            self._store(key, c, epipolar)
+        pairs = graph.init_pairs(m + 1, radius)
+        self._match(pairs, use_prior=False)
+        frames = torch.tensor(buf.frame_index[:m + 1], dtype=torch.float32)
+        alpha = (frames - frames[0]) / (frames[m] - frames[0])
+        first = buf.poses[0].clone()
+        end = compose(model.pose.to(first), first)
+        buf.poses[:m + 1] = interpolate(first.expand(m + 1, 7), end.expand(m + 1, 7), alpha.to(first))
+        buf.disps[0] = model.disparity.to(buf.disps)
+        for k in range(1, m + 1):
+            buf.disps[k] = transfer_disparity(buf.poses[0], buf.disps[0], buf.poses[k], self.shared.intrinsics,
+                                              self.params.min_depth)
+        self._optimise(0, m + 1, pairs, 4 if m + 1 < len(buf) else self.fcfg.init_iters, focal=False)
+        return m + 2
 
     def _proximity(self, k: int, lo: int) -> list[tuple[int, int]]:
         """Proximity pairs of the newest keyframes within the window (DROID's frontend rule): at most
@@ -396,10 +453,16 @@ class Frontend:
         return lo
 
     def _window_ba(self, lo: int, k: int, iters: int) -> None:
+        """BA over the window's young edges.  Its gauge (pose and scale) is held by the two oldest keyframes
+        the edges still reach, not by the window's first two: edges retire after ``max_age`` iterations, and
+        a camera travelling into the scene never comes back to make proximity edges with its old keyframes,
+        so on the ``drive`` preset the window's first keyframes were 15-20 keyframes older than any of its
+        edges, the window's pose and scale were free (held by the damping alone), and the scale drifted."""
         f = self.fcfg
         window = self.cache.young_pairs(self.shared.iterations, f.max_age, lo)
         window = graph.cap_edges(window, f.max_edges)
-        self._optimise(lo, k + 1, window, iters)
+        reached = min(min(p) for p in window) if window else lo
+        self._optimise(max(lo, reached), k + 1, window, iters)
 
     def _remove(self, k: int) -> None:
         """Keyframe removal: drop keyframe k with its edges and renumber the later ones."""

@@ -12,8 +12,8 @@ candidate (with ``frontend.skip_doomed`` the tracker may pass a candidate
 over; the next one's early match then goes unused and the frontend matches it
 itself).  The pair is then computed on the second core while the main thread
 runs the previous keyframe's window BA (on one torch thread), instead of after
-it.  The result is the same as on the main thread: DIS without an
-initial flow depends on its two images only (:mod:`droidw_cli.correspondence.dis`).
+it.  The result is the same as on the main thread: DIS depends on its two images and
+the start only (:mod:`droidw_cli.correspondence.dis`).
 The candidate's features (the uncertainty's input) are extracted there too,
 before the match.
 
@@ -44,7 +44,7 @@ Scouted = tuple[Any, np.ndarray, Any, bool]
 class Scout:
     """The motion filter, run wherever :meth:`frames` is iterated, and early work on a worker of its own.
 
-    ``prematch(image_c, image_p)`` returns the frontend's match of the pair
+    ``prematch(image_c, image_p, start)`` returns the frontend's match of the pair
     (its :meth:`~droidw_cli.slam.frontend.Frontend.match_adjacent`), and
     ``prefeatures(image_c)`` the candidate's features; None: not done early.
     The early work runs only between :meth:`release` and :meth:`hold`: the
@@ -61,6 +61,8 @@ class Scout:
         self._prefeatures = prefeatures
         self._initialised = False
         self._flows: dict[int, float] = {}  # candidate frame → its mean flow from the previous candidate (grid px)
+        # candidate frame → (previous candidate, the motion filter's flow from it, half size): see start()
+        self._starts: dict[int, tuple[int, np.ndarray]] = {}
         self._turn = threading.Event()  # set: the tracker has taken the last candidate
         self._turn.set()
         self._closed = False
@@ -85,6 +87,9 @@ class Scout:
                 continue
             self.mfilter.accept(image)
             self._flows[frame.index] = stats.mean
+            if previous is not None and self.mfilter.accepted_flow is not None:
+                with self._lock:
+                    self._starts[frame.index] = (previous[0], self.mfilter.accepted_flow)
             if initialised:
                 self._queue(frame.index, image, previous)
                 previous = (frame.index, image)
@@ -103,14 +108,26 @@ class Scout:
         if self._prefeatures is not None:  # first: the BA needs them as soon as the match
             jobs[("features", frame)] = partial(self._prefeatures, image)
         if self._prematch is not None and previous is not None:
-            jobs[("match", frame, previous[0])] = partial(self._prematch, image, previous[1])
+            start = self.start(frame, previous[0])
+            jobs[("match", frame, previous[0])] = partial(self._prematch, image, previous[1], start)
         with self._lock:
             self._pending.update(jobs)
             if self._released:
                 self._start()
 
+    def start(self, frame: int, previous: int) -> np.ndarray | None:
+        """The motion filter's flow (half size, px) from candidate ``previous`` to candidate ``frame``, when
+        ``previous`` was ``frame``'s reference: it starts the match of the pair (:meth:`Frontend.match_adjacent`)."""
+        with self._lock:
+            got = self._starts.get(frame)
+        return got[1] if got is not None and got[0] == previous else None
+
     def flow(self, frame: int) -> float:
-        """Candidate ``frame``'s mean flow from the previous candidate in grid px (once; 0 for the first)."""
+        """Candidate ``frame``'s mean flow from the previous candidate in grid px (once; 0 for the first).
+        The tracker asks in frame order: the starts of earlier candidates are no longer needed."""
+        with self._lock:
+            for old in [f for f in self._starts if f < frame]:
+                del self._starts[old]
         return self._flows.pop(frame, 0.0)
 
     def taken(self, initialised: bool) -> None:

@@ -227,8 +227,9 @@ class Tracker:
         # prefetch thread, beside the main thread's BA (without a prefetch thread, on the main one)
         ahead = cfg.frontend.match_ahead and cfg.io.prefetch > 0
         scout = Scout(MotionFilter(cfg.motion_filter, cfg.correspondence.coarsest_scale), timer,
-                      (lambda a, b: fe.match_adjacent(a, b, self.correspondence)) if ahead else None,
+                      (lambda a, b, start: fe.match_adjacent(a, b, start, self.correspondence)) if ahead else None,
                       self._extract if ahead and self.features is not None else None)
+        fe.starts = scout
         if ahead:
             fe.early = scout
         filler = TrajectoryFiller(fe, cfg.filler)

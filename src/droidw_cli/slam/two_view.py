@@ -1,0 +1,128 @@
+"""Two-view initialisation: the relative pose and a depth map from the flow between two keyframes.
+
+Started flat (every pose the identity, every disparity 1), the Gauss-Newton
+of the first BA explains a camera walking *into* the scene as one moving
+sideways and turning: near the focus of expansion the flow of a forward
+translation is small, and a lateral translation plus a rotation produce
+nearly the same field over a narrow view (the bas-relief ambiguity of
+structure from motion).  On the ``forward`` preset (seed 1) the first
+keyframes' heading came out 58° off that way, and the map built on it never
+recovered.  ORB-SLAM initialises from a two-view model instead; so does this.
+
+For keyframes a, b with correspondences x_a → x_b on the 1/8 grid (the
+cached edge's targets where its confidence is at least ``min_weight``), in
+normalised coordinates x̃ = K⁻¹ [x, 1]:
+
+1. the essential matrix E with x̃_bᵀ E x̃_a = 0 by RANSAC (OpenCV's five-point
+   solver; threshold ``thresh_px`` grid px), then by least median of squares
+   on RANSAC's inliers (RANSAC keeps its best minimal sample: on a synthetic
+   0.8 m step with 0.05 grid px of noise its heading erred by up to 5°, the
+   refined one by under 1°), decomposed into the (R, t), ‖t‖ = 1, that puts
+   most inliers in front of both cameras;
+2. each inlier's depth in a by the linear triangulation along its ray,
+
+       z_a = −((x̃_b × R x̃_a) · (x̃_b × t)) / ‖x̃_b × R x̃_a‖²,
+
+   kept where it is positive and the parallax angle, sin θ ≈ ‖x̃_b × R x̃_a‖
+   / ‖x̃_b‖ ‖x̃_a‖, is at least ``min_parallax`` radians (near the focus of
+   expansion, and on the sky, depth is unobservable from two views);
+3. the scale: depths divided by their median (so the median disparity is 1,
+   the flat start's level), t likewise; cells without a kept depth take
+   disparity 1.
+
+A pair whose inliers are fewer than ``min_inliers`` of its confident cells
+(movers fill the view, or the flow failed) gives ``None``: the caller keeps
+the flat start.  So does a pair that a homography explains as well, one
+whose RANSAC homography (same threshold) keeps at least ``max_homography``
+of the essential matrix's inliers: a turning camera, or a plane, shows no
+depth, and the essential matrix of such a pair is ill-posed (the model
+selection of ORB-SLAM's initialiser, by inlier counts).  The real follow
+shot ``lady-running`` (66 confident cells, 64 of them a homography's) took a
+spurious translation from it, dropped 13 keyframes to 8 and never turned 5°
+in a window, so ``--calib auto`` estimated no focal length; on the ``walk``
+preset (ratio 0.995) the flat start did better (seeds 1/2: 0.26/0.26 cm
+against 0.32/0.29).  The street presets read 0.58 (``forward``) and 0.87
+(``drive``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import torch
+from torch import Tensor
+
+from droidw_cli.geometry.lie import so3_exp_quat
+
+MIN_POINTS = 40
+
+
+@dataclass(frozen=True)
+class TwoView:
+    """The pose of keyframe b relative to a (world-to-camera with a's camera as the world, (7,)), a's disparity
+    (h, w) with median 1 where it was triangulated, and the share of confident cells that are inliers."""
+
+    pose: Tensor
+    disparity: Tensor
+    inliers: float
+    triangulated: float
+
+
+def _normalised(x: np.ndarray, y: np.ndarray, k: np.ndarray) -> np.ndarray:
+    fx, fy, cx, cy = k
+    return np.stack([(x - cx) / fx, (y - cy) / fy], -1)
+
+
+def two_view(target: Tensor, weight: Tensor, intrinsics: Tensor, min_weight: float = 0.5, thresh_px: float = 0.5,
+             min_parallax: float = 0.01, min_inliers: float = 0.3,
+             max_homography: float = 0.95) -> TwoView | None:
+    """Relative pose and disparity of edge (a, b) from its targets (h, w, 2) and confidences (h, w, 2), grid
+    intrinsics ``[fx, fy, cx, cy]`` (module docstring); None when the pair does not determine them."""
+    h, w = target.shape[:2]
+    k = intrinsics.detach().cpu().double().numpy()
+    tgt = target.detach().cpu().double().numpy()
+    conf = weight.detach().cpu().float().numpy()[..., 0]
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    inside = (tgt[..., 0] >= 0) & (tgt[..., 0] <= w - 1) & (tgt[..., 1] >= 0) & (tgt[..., 1] <= h - 1)
+    ok = (conf >= min_weight) & inside & np.isfinite(tgt).all(-1)
+    if ok.sum() < MIN_POINTS:
+        return None
+    pa = _normalised(xs[ok], ys[ok], k)
+    pb = _normalised(tgt[..., 0][ok], tgt[..., 1][ok], k)
+    thresh = thresh_px / float(np.sqrt(k[0] * k[1]))
+    e, mask = cv2.findEssentialMat(pa, pb, focal=1.0, pp=(0.0, 0.0), method=cv2.RANSAC, prob=0.999,
+                                   threshold=thresh)
+    if e is None or e.shape != (3, 3):
+        return None
+    first = mask.ravel() > 0
+    if first.sum() >= MIN_POINTS:  # least median of squares on RANSAC's inliers: its estimate is a minimal sample's
+        refined, _ = cv2.findEssentialMat(pa[first], pb[first], focal=1.0, pp=(0.0, 0.0), method=cv2.LMEDS)
+        if refined is not None and refined.shape == (3, 3):
+            e = refined
+    count, rot, t, mask = cv2.recoverPose(e, pa, pb, focal=1.0, pp=(0.0, 0.0), mask=mask)
+    inl = mask.ravel() > 0
+    if count < MIN_POINTS or count < min_inliers * ok.sum():
+        return None
+    hom, hmask = cv2.findHomography(np.stack([xs[ok], ys[ok]], -1), tgt[ok], cv2.RANSAC, thresh_px)
+    if hom is not None and hmask.sum() >= max_homography * count:  # a turn, or a plane: no depth to be had
+        return None
+    t = t.ravel()
+    ra = np.concatenate([pa, np.ones((len(pa), 1))], 1) @ rot.T  # R x̃_a
+    xb = np.concatenate([pb, np.ones((len(pb), 1))], 1)
+    cross_r, cross_t = np.cross(xb, ra), np.cross(xb, t)
+    norm2 = (cross_r * cross_r).sum(1)
+    z = -(cross_r * cross_t).sum(1) / np.maximum(norm2, 1e-18)
+    sin_par = np.sqrt(norm2) / (np.linalg.norm(xb, axis=1) * np.linalg.norm(ra, axis=1))
+    good = inl & (z > 0) & (sin_par >= min_parallax)
+    if good.sum() < MIN_POINTS:
+        return None
+    scale = float(np.median(z[good]))
+    disp = np.ones((h, w), np.float32)
+    cells = np.flatnonzero(ok.ravel())[good]
+    disp.ravel()[cells] = (scale / z[good]).astype(np.float32)
+    rvec, _ = cv2.Rodrigues(rot)
+    quat = so3_exp_quat(torch.from_numpy(rvec.ravel()).float())
+    pose = torch.cat([torch.from_numpy(t / scale).float(), quat])
+    return TwoView(pose, torch.from_numpy(disp), float(count) / float(ok.sum()), float(good.sum()) / (h * w))

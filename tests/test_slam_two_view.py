@@ -1,0 +1,88 @@
+"""Two-view initialisation: relative pose and disparity from one edge's correspondences."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from droidw_cli.eval.metrics import heading_error
+from droidw_cli.geometry.lie import quat_to_matrix
+from droidw_cli.slam.two_view import two_view
+
+K8 = np.array([52.5, 52.5, 31.5, 23.5])  # the 1/8 grid of 640 × 480 at f = 525 (the generator's camera)
+H, W = 48, 64
+
+
+def _edge(rvec, t, seed=0, noise=0.05, outliers=0.0, depth=(2.0, 20.0)):
+    """Targets (h, w, 2) and confidences of a rigid scene with random depths seen from two poses (X_b = R X_a + t)."""
+    rng = np.random.default_rng(seed)
+    z = rng.uniform(*depth, (H, W))
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float64)
+    pts = np.stack([(xs - K8[2]) / K8[0] * z, (ys - K8[3]) / K8[1] * z, z], -1)
+    rot, _ = cv2.Rodrigues(np.asarray(rvec, np.float64))
+    cam_b = pts @ rot.T + np.asarray(t)
+    u = cam_b[..., 0] / cam_b[..., 2] * K8[0] + K8[2]
+    v = cam_b[..., 1] / cam_b[..., 2] * K8[1] + K8[3]
+    target = np.stack([u, v], -1) + rng.normal(0.0, noise, (H, W, 2))
+    bad = rng.uniform(size=(H, W)) < outliers
+    target[bad] = rng.uniform([0, 0], [W - 1, H - 1], (int(bad.sum()), 2))
+    weight = torch.ones(H, W, 2)
+    return torch.tensor(target, dtype=torch.float32), weight, rot, z
+
+
+def _pose_errors(model, rot, t):
+    est_r = quat_to_matrix(model.pose[3:].double()).numpy()
+    angle = np.degrees(np.arccos(np.clip((np.trace(est_r.T @ rot) - 1) / 2, -1, 1)))
+    te = model.pose[:3].double().numpy()
+    heading = np.degrees(np.arccos(np.clip(te @ np.asarray(t) / (np.linalg.norm(te) * np.linalg.norm(t)), -1, 1)))
+    return angle, heading
+
+
+@pytest.mark.parametrize("outliers", [0.0, 0.35, 0.55])
+def test_a_forward_step_is_recovered_with_its_depths(outliers):
+    """Walking 0.8 m into a scene 2-20 m deep, turning a little, with up to 55 % wild correspondences: heading
+    within 1.5°, rotation within 0.3°."""
+    t = np.array([0.05, -0.02, 0.8])
+    target, weight, rot, z = _edge([0.01, 0.05, -0.02], t, outliers=outliers)
+    model = two_view(target, weight, torch.tensor(K8, dtype=torch.float32))
+    assert model is not None and model.inliers > 0.55 * (1 - outliers)
+    angle, heading = _pose_errors(model, rot, t)
+    assert angle < 0.3 and heading < 1.5
+    disp = model.disparity.numpy()
+    assert np.median(disp) == pytest.approx(1.0, abs=0.05)  # the flat start's level
+    triangulated = disp != 1.0
+    assert model.triangulated > 0.7 * (1 - outliers)
+    scale = np.median(disp[triangulated] * z[triangulated])  # disparity ∝ 1/z up to the scale
+    rel = np.abs(disp[triangulated] * z[triangulated] / scale - 1)
+    assert np.median(rel) < 0.1
+    # the translation has the disparities' scale: depth z·s ↔ ‖t‖·s
+    assert float(np.linalg.norm(model.pose[:3])) == pytest.approx(np.linalg.norm(t) / scale, rel=0.1)
+
+
+def test_pure_rotation_and_too_few_confident_cells_give_no_model():
+    target, weight, _, _ = _edge([0.02, 0.08, 0.0], [0.0, 0.0, 0.0], noise=0.02)
+    assert two_view(target, weight, torch.tensor(K8, dtype=torch.float32)) is None  # no parallax: no depth
+    target, weight, _, _ = _edge([0.01, 0.05, -0.02], [0.05, -0.02, 0.8])
+    weight[:] = 0.0
+    weight[:4, :5] = 1.0  # 20 confident cells
+    assert two_view(target, weight, torch.tensor(K8, dtype=torch.float32)) is None
+
+
+def test_heading_error_reads_the_direction_of_travel_in_the_first_camera():
+    poses = np.repeat(np.eye(4)[None], 3, 0)
+    poses[:, :3, 3] = [[0, 0, 0], [0, 0, 1], [0, 0, 2]]  # straight ahead (camera z)
+    est = poses.copy()
+    est[:, :3, 3] *= 7.0  # any scale
+    assert heading_error(poses, est) == pytest.approx(0.0, abs=1e-9)
+    turned = est.copy()
+    turned[:, :3, 3] = [[0, 0, 0], [1, 0, 1], [2, 0, 2]]  # 45° to the right
+    assert heading_error(poses, turned) == pytest.approx(45.0)
+    rotated = poses.copy()  # the same motion in another world frame: the first camera's view of it is the same
+    world, _ = cv2.Rodrigues(np.array([0.3, -1.0, 0.2]))
+    rotated[:, :3, :3] = world @ poses[:, :3, :3]
+    rotated[:, :3, 3] = poses[:, :3, 3] @ world.T
+    assert heading_error(poses, rotated) == pytest.approx(0.0, abs=1e-6)
+    with pytest.raises(ValueError):
+        heading_error(poses, np.repeat(np.eye(4)[None], 3, 0))
