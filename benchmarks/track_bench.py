@@ -1,6 +1,6 @@
 """Tracking benchmark: ATE, keyframe ratio, frames/s, ms per frame by stage and peak memory.
 
-    python benchmarks/track_bench.py [--presets walk walk-static wobble rotate stopgo fixed] [--seeds 1]
+    python benchmarks/track_bench.py [--presets walk walk-static wobble rotate stopgo fixed forward ride drive] [--seeds 1]
                                      [--frames 0] [--config default] [--baseline] [--backend cpu]
                                      [--memory-minutes 0.5 1] [--set KEY=VALUE ...]
     python benchmarks/track_bench.py --presets --memory-minutes 1 10     # memory only
@@ -8,11 +8,16 @@
 Table 1: one row per synthetic sequence (the generator's realistic presets:
 hand-held walk with movers, its static control, a near-still wobbling
 camera with people close in front, fast roll/pitch/yaw, stop-and-go, a fixed
-camera; motion blur, JPEG, noise and gain drift as each preset sets them),
-known calibration, 640×480.  Each sequence is rendered once into
+camera, and three cameras travelling down a street: a forward walk, a bike
+ride and a car drive at 10 frames/s, 1241×376 as on KITTI; motion blur,
+JPEG, noise and gain drift as each preset sets them), known calibration,
+640×480 unless the preset says otherwise.  "ATE [% path]" is the ATE over
+the length of the true path; "heading" the angle between the true and the
+estimated direction of travel over the first five keyframes, in the first
+camera's frame (:func:`droidw_cli.eval.metrics.heading_error`).  Each sequence is rendered once into
 ``benchmarks/.cache`` (a TUM-style folder of PNGs) and tracked from there,
 so "decode" is real PNG decoding, not rendering.  ``--frames 0`` keeps each preset's own length
-(450, 300 for ``fixed``).  ``--baseline`` adds the ATE with
+(450; 300 for ``fixed``, 240 for ``ride``, 100 for ``drive``).  ``--baseline`` adds the ATE with
 ``uncertainty.enable=false``.  "ATE kf" is over keyframes only.
 Table 2: peak memory against video length (frames streamed from the
 generator, nothing on disk, so its frames/s include rendering) and the ATE over the whole stream: the
@@ -31,7 +36,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _bench_common import cached_sequence, peak_mb, print_table, run_case_subprocess, track_source  # noqa: E402
 
 STAGES = ("decode", "motion_filter", "features", "flow", "ba", "global_ba", "filler")
-PRESETS = ("walk", "walk-static", "wobble", "rotate", "stopgo", "fixed")
+PRESETS = ("walk", "walk-static", "wobble", "rotate", "stopgo", "fixed", "forward", "ride", "drive")
+HEADING_KEYFRAMES = 5  # the initial heading is measured over the first five keyframes
 
 
 def one(args: argparse.Namespace) -> None:
@@ -39,6 +45,7 @@ def one(args: argparse.Namespace) -> None:
     import numpy as np
 
     from droidw_cli.eval import evaluate_ate
+    from droidw_cli.eval.metrics import heading_error
     from droidw_cli.io.calibration import Calibration
     from droidw_cli.io.frames import open_source
     from droidw_cli.io.trajectory import Trajectory
@@ -61,7 +68,12 @@ def one(args: argparse.Namespace) -> None:
     kf = result.kf_index
     ate_kf = (evaluate_ate(Trajectory(ts[kf], poses[kf]), Trajectory(result.timestamps[kf], result.poses_c2w[kf])).rmse
               if len(kf) >= 3 and not still else float("nan"))
+    first = kf[:HEADING_KEYFRAMES]
+    heading = (heading_error(poses[first], result.poses_c2w[first])
+               if len(first) == HEADING_KEYFRAMES and not (still or fixed) else float("nan"))
+    path = float(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1).sum())
     print(json.dumps({"frames": len(result.timestamps), "keyframes": int(len(kf)), "seconds": seconds,
+                      "path_m": path, "heading_deg": heading,
                       "fps": len(result.timestamps) / seconds, "stages": result.timings, "peak_mb": peak_mb(),
                       "ate_cm": ate.rmse * 100 if ate is not None else float("nan"), "ate_kf_cm": ate_kf * 100,
                       "identity": fixed, "initialised": result.initialised}))
@@ -112,12 +124,14 @@ def main() -> None:
                    if args.baseline else float("nan"))
             st, n = r["stages"], r["frames"]
             ate = "identity" if r["identity"] else _cell(r["ate_cm"])
-            rows.append([f"{preset} seed {seed}", n, f"{100 * r['keyframes'] / n:.0f} %", ate,
-                         _cell(r["ate_kf_cm"]), _cell(off), f"{r['fps']:.2f}",
+            share = _cell(r["ate_cm"] / r["path_m"], "{:.3f}") if r["path_m"] > 0 and not r["identity"] else "–"
+            rows.append([f"{preset} seed {seed}", n, f"{100 * r['keyframes'] / n:.0f} %", f"{r['path_m']:.1f}", ate,
+                         share, _cell(r["ate_kf_cm"]), _cell(off), _cell(r["heading_deg"], "{:.1f}"), f"{r['fps']:.2f}",
                          *(f"{1000 * st.get(s, 0.0) / n:.0f}" for s in STAGES), f"{r['peak_mb']:.0f}"])
     if rows:
         print(f"\nTracking, config {args.config}, backend {args.backend}, known calibration (ms are per input frame)")
-        print_table(["sequence", "frames", "keyframes", "ATE [cm]", "ATE kf [cm]", "ATE off [cm]", "frames/s",
+        print_table(["sequence", "frames", "keyframes", "path [m]", "ATE [cm]", "ATE [% path]", "ATE kf [cm]",
+                     "ATE off [cm]", "heading [°]", "frames/s",
                      *[f"{s} ms" for s in STAGES], "peak MB"], rows)
     if args.memory_minutes:
         mem_rows = []

@@ -208,3 +208,25 @@ __all__ = [
     "AteResult", "AssociationError", "ErrorStats", "RpeResult", "TooFewMatchesError",
     "evaluate_ate", "evaluate_rpe", "evo_trajectory", "match", "relative_errors",
 ]
+
+
+def heading_error(gt_poses: np.ndarray, est_poses: np.ndarray) -> float:
+    """The angle (degrees) between the true and estimated directions of travel from the first pose to the last.
+
+    For camera-to-world poses (N, 4, 4) with centres c_k and first rotation R₀, each trajectory's
+    direction of travel seen from its first camera is d = R₀ᵀ (c_{N−1} − c₀), and the error is
+    ∠(d_gt, d_est).  It needs no alignment and ignores the scale, so over a monocular run's first
+    keyframes it tells whether initialisation found the way the camera went (a forward motion taken
+    for a sideways one plus a turn shows here first).
+    """
+    gt, est = np.asarray(gt_poses, np.float64), np.asarray(est_poses, np.float64)
+    if gt.shape != est.shape or gt.ndim != 3 or gt.shape[0] < 2:
+        raise ValueError(f"need two matching stacks of at least 2 poses, got {gt.shape} and {est.shape}")
+    dirs = []
+    for poses in (gt, est):
+        d = poses[0, :3, :3].T @ (poses[-1, :3, 3] - poses[0, :3, 3])
+        norm = float(np.linalg.norm(d))
+        if norm == 0.0:
+            raise ValueError("the camera does not move between the first and the last pose")
+        dirs.append(d / norm)
+    return float(np.degrees(np.arccos(np.clip(dirs[0] @ dirs[1], -1.0, 1.0))))
