@@ -9,7 +9,7 @@ import torch
 
 from droidw_cli.ba.registry import get_backend
 from droidw_cli.config import load_config
-from droidw_cli.slam import frontend as frontend_mod
+from droidw_cli.slam import keyframe_maps
 from droidw_cli.slam.frontend import Frontend
 
 GRID = (6, 8)
@@ -43,9 +43,9 @@ def test_uncertainty_with_chunked_evidence_equals_one_block(monkeypatch, chunk):
     fe = _frontend_with_features(23)
     fe.archive(0, 4)  # the oldest are frozen (float16), the live ones follow
     assert fe.evidence(4, 6) is not None  # the default config reads evidence maps
-    monkeypatch.setattr(frontend_mod, "UNCERTAINTY_CHUNK", 10**6)
+    monkeypatch.setattr(keyframe_maps, "UNCERTAINTY_CHUNK", 10**6)
     whole = fe.uncertainty()
-    monkeypatch.setattr(frontend_mod, "UNCERTAINTY_CHUNK", chunk)
+    monkeypatch.setattr(keyframe_maps, "UNCERTAINTY_CHUNK", chunk)
     assert torch.equal(fe.uncertainty(), whole)
     assert torch.equal(fe.uncertainty(5, 17), whole[5:17])
 

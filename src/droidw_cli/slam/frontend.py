@@ -6,7 +6,11 @@ Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distanc
   parallax that no homography explains (:mod:`droidw_cli.slam.parallax`), or
   at ``warmup`` keyframes whatever the parallax.  The keyframes are brought
   in one at a time (constant-velocity pose guess) with a few BA iterations
-  each, then ``init_iters`` iterations over all of them.  A fixed camera never
+  each, then ``init_iters`` iterations over all of them; the first three
+  start from a two-view model of keyframes 0 and 2 (:mod:`droidw_cli.slam.two_view`)
+  unless a homography explains that pair as well, where every pose starts at
+  the identity and every disparity at 1 (a camera walking into the scene
+  took the flat start for a sideways step: 58° off on the ``forward`` preset).  A fixed camera never
   gets a second keyframe (the motion filter tests the median flow before
   initialisation), so it stays at the identity.
 * Under ``--calib auto`` the focal length stays fixed during initialisation and
@@ -24,7 +28,8 @@ Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distanc
   less than ``keyframe_thresh`` apart, the second-newest is removed with its
   edges and the second round of ``iters2`` iterations is skipped, so a camera
   that slows down or stops adds no keyframes.  The oldest two keyframes of a
-  window that does not start at 0 stay fixed (gauge and scale).
+  window that does not start at 0 stay fixed (gauge and scale); of the
+  window's edges, rather: the oldest two keyframes they still reach.
 * With the uncertainty on (and ``dynamics.mode`` epipolar|both), every edge loses the
   pixels of its keyframe that the dominant epipolar geometry cannot explain
   (:mod:`droidw_cli.dynamics.epipolar`).  The learned uncertainty reads the
@@ -40,8 +45,8 @@ The keyframe buffer, the edge cache, θ and the intrinsics live on the BA backen
 are copied to the device once, when they are cached.  The new edges of a keyframe are matched, each
 with its epipolar distance map, in one
 :meth:`~droidw_cli.correspondence.base.CorrespondenceSource.match_all` call, on as many threads as
-there are cores when the source allows it; the pair (k, k − 1), which needs no initial flow, usually
-comes ready from the scout (:mod:`droidw_cli.slam.scout`), which matched it on another thread
+there are cores when the source allows it (each flow started as :mod:`droidw_cli.slam.starts` says); the
+pair (k, k − 1), started from the motion filter's flow, usually comes ready from the scout (:mod:`droidw_cli.slam.scout`), which matched it on another thread
 during the previous keyframe's BA.
 """
 
@@ -54,7 +59,6 @@ import numpy as np
 import torch
 
 from droidw_cli.ba.interface import BABackend
-from droidw_cli.ba.uncertainty import uncertainty_map
 from droidw_cli.ba.params import BAParams
 from droidw_cli.config import FrontendConfig, TrackConfig
 from droidw_cli.correspondence.base import Correspondence, MatchCall
@@ -63,7 +67,8 @@ from droidw_cli.dynamics.inloop import KeyframeMasks, observed_disparity
 from droidw_cli.slam import graph
 from droidw_cli.slam.depth_prior import seed_disparity
 from droidw_cli.slam.distance import candidate_distance, frame_distance, transfer_disparity
-from droidw_cli.slam.evidence import EVIDENCE_CHANNELS, evidence_maps
+from droidw_cli.slam.evidence import EVIDENCE_CHANNELS
+from droidw_cli.slam.keyframe_maps import KeyframeMaps
 from droidw_cli.slam.focal import clamp_focal, focal_observable
 from droidw_cli.slam.keyframes import KeyframeBuffer
 from droidw_cli.slam.optimizer import SharedState, run_window, window_state
@@ -77,9 +82,6 @@ from droidw_cli.slam.two_view import two_view
 TWO_VIEW_SPAN = 2
 #: proximity edges are sought for the keyframes this close to the newest (DROID: t1 − 5)
 PROXIMITY_RECENT = 5
-#: :meth:`Frontend.uncertainty` computes the evidence maps of this many keyframes at a time (all 200
-#: of the backend's horizon at once reproject some 2000 edges, a few hundred MB at a run's end)
-UNCERTAINTY_CHUNK = 32
 
 
 def window_reach(f: FrontendConfig, horizon: int) -> int:
@@ -93,7 +95,7 @@ def _epipolar_of(c: Correspondence) -> np.ndarray | None:
     return epipolar_distance(c.flow, c.weight[..., 0].numpy())
 
 
-class Frontend:
+class Frontend(KeyframeMaps):
     """Owns the keyframe buffer, the edge cache and the window BA."""
 
     def __init__(self, cfg: TrackConfig, params: BAParams, backend: BABackend, correspondence,
@@ -476,59 +478,6 @@ class Frontend:
         self.images = {renumber(i): v for i, v in self.images.items() if i != k}
         self._epipolar = {(renumber(a), renumber(b)): v for (a, b), v in self._epipolar.items() if k not in (a, b)}
         self._raw = {(renumber(a), renumber(b)): v for (a, b), v in self._raw.items() if k not in (a, b)}
-
-    def evidence(self, lo: int = 0, hi: int | None = None) -> torch.Tensor | None:
-        """Evidence channels (hi − lo, C, h, w) of keyframes [lo, hi) from their cached outgoing edges
-        (None when unused)."""
-        unc = self.params.uncertainty
-        n = len(self.buffer)
-        hi = n if hi is None else hi
-        if not (unc.enable and unc.evidence) or self.buffer.features is None:
-            return None
-        pairs = [p for p in self.cache.pairs() if lo <= p[0] < hi]
-        if n < 2 or not pairs:
-            return torch.zeros(hi - lo, EVIDENCE_CHANNELS, *self.buffer.grid, device=self.buffer.device)
-        start = min(lo, min(j for _, j in pairs))
-        state = window_state(self.buffer, start, n, self.shared, with_features=False)
-        maps = evidence_maps(self.backend, state, self.cache.edge_set(pairs, offset=start), self.params.min_depth)
-        return maps[lo - start:hi - start]
-
-    def confidence(self, lo: int = 0, hi: int | None = None) -> torch.Tensor:
-        """Mean confidence (hi − lo, h, w) of each keyframe's cached outgoing edges (archived: frozen)."""
-        buf = self.buffer
-        hi = len(buf) if hi is None else hi
-        conf = torch.zeros(hi - lo, *buf.grid, device=buf.device)
-        count = torch.zeros(hi - lo)
-        for i, j in self.cache.pairs():
-            if lo <= i < hi:
-                conf[i - lo] += self.cache.weight((i, j))[..., 0].float()
-                count[i - lo] += 1
-        conf /= count.clamp(min=1).to(conf.device)[:, None, None]
-        for k, c in buf.frozen_conf.items():
-            if lo <= k < hi:
-                conf[k - lo] = c.float()
-        return conf
-
-    def uncertainty(self, lo: int = 0, hi: int | None = None) -> torch.Tensor | None:
-        """u (hi − lo, h, w) of keyframes [lo, hi) under the current θ (archived: frozen); None when off."""
-        buf, theta = self.buffer, self.shared.theta
-        hi = len(buf) if hi is None else hi
-        if buf.features is None or theta is None or not self.params.uncertainty.enable:
-            return None
-        live = [k for k in range(lo, hi) if k not in buf.frozen_u]
-        out = torch.zeros(hi - lo, *buf.grid, device=buf.device)
-        if live:
-            a, b = live[0], live[-1] + 1  # archived keyframes are the oldest: the live ones are contiguous
-            # evidence in chunks of keyframes (a frame's maps read only its own edges: the same values), the
-            # affine map over the whole range at once (its matrix product rounds differently per batch size)
-            chunks = [self.evidence(c, min(b, c + UNCERTAINTY_CHUNK)) for c in range(a, b, UNCERTAINTY_CHUNK)]
-            maps = None if chunks[0] is None else torch.cat(chunks)
-            out[a - lo:b - lo] = uncertainty_map(buf.feature_block(a, b, torch.float32), theta,
-                                                 self.params.uncertainty.softplus_offset, maps)
-        for k, u in buf.frozen_u.items():
-            if lo <= k < hi:
-                out[k - lo] = u.float()
-        return out
 
     def drop_before(self, lo: int) -> None:
         """Forget every edge (targets, raw confidences, epipolar maps) with an end before keyframe lo."""
