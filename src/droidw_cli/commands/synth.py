@@ -61,11 +61,13 @@ def synth(out_dir: str, preset: str, frames: int | None, seed: int, movers: int 
     With --layout kitti: image_0/ (--grey) or image_2/, depth/, mask/,
     times.txt, calib.txt (P0-P3), poses.txt (KITTI, relative to frame 0).
     Presets walk, walk-static, wobble, rotate, stopgo and fixed add camera
-    motions, motion blur, noise, JPEG and gain drift (realistic 640x480).
+    motions, motion blur, noise, JPEG and gain drift (realistic 640x480);
+    forward, ride and drive travel down a street with walkers and cars (a
+    walk, a bike ride, and a car at 10 frames/s with KITTI's 1241x376 camera).
     Examples:
       droidw synth seq/ --frames 300 --movers 3 --video
       droidw synth seq/ --preset rotate --blur 0.3
-      droidw synth seq-kitti/ --layout kitti --grey
+      droidw synth seq-kitti/ --preset drive --layout kitti --grey
     """
     from droidw_cli.synth import SynthConfig, write_sequence
 

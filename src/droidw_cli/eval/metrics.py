@@ -204,12 +204,6 @@ def evaluate_rpe(gt: Trajectory, est: Trajectory, ate: AteResult, delta: int = 1
     return RpeResult(int(delta), ErrorStats.from_errors(errors))
 
 
-__all__ = [
-    "AteResult", "AssociationError", "ErrorStats", "RpeResult", "TooFewMatchesError",
-    "evaluate_ate", "evaluate_rpe", "evo_trajectory", "match", "relative_errors",
-]
-
-
 def heading_error(gt_poses: np.ndarray, est_poses: np.ndarray) -> float:
     """The angle (degrees) between the true and estimated directions of travel from the first pose to the last.
 
@@ -230,3 +224,10 @@ def heading_error(gt_poses: np.ndarray, est_poses: np.ndarray) -> float:
             raise ValueError("the camera does not move between the first and the last pose")
         dirs.append(d / norm)
     return float(np.degrees(np.arccos(np.clip(dirs[0] @ dirs[1], -1.0, 1.0))))
+
+
+__all__ = [
+    "AteResult", "AssociationError", "ErrorStats", "RpeResult", "TooFewMatchesError",
+    "evaluate_ate", "evaluate_rpe", "evo_trajectory", "heading_error", "match", "relative_errors",
+]
+
