@@ -18,7 +18,11 @@ f₀(t) = f(t − 1) · (t − r) / (t − 1 − r) for reference keyframe r (DI
 this start the flow of a camera travelling into the scene at 10 frames/s failed beyond two frames
 (the ``drive`` preset: DIS MEDIUM's median error 0.5 px at two frames, 2.9 px at three, 11 px at four),
 the mean flow *fell* as the motion grew, no frame became a candidate, and keyframes came only at
-``max_gap``, ten metres apart.  The accepted candidate's flow (:attr:`MotionFilter.accepted_flow`)
+``max_gap``, ten metres apart.  Only up to ``max_gap`` frames from the reference: a fixed camera before
+initialisation never gets a second keyframe, and on the ``fixed`` preset (seed 2) walkers smeared over a
+textureless wall made its flow reach the start's threshold after some 20 frames; from there each start
+carried on the last flow, DIS confirmed it where nothing shows, and the median grew to 127 grid px by frame
+295 (the identity held, but the motion filter's time went from 2 to 5 ms a frame).  The accepted candidate's flow (:attr:`MotionFilter.accepted_flow`)
 then starts the match of the new keyframe's first edge (:mod:`droidw_cli.slam.scout`).
 
 The flow here is a cheap DIS FAST estimate on a half-size grey image (ULTRAFAST
@@ -138,7 +142,7 @@ class MotionFilter:
         floor = self.cfg.init_min_quartile
         waited = not initialised and floor > 0 and self._since >= self.cfg.max_gap
         start = None
-        if self._flow_last is not None and self._since >= 2:  # constant velocity from the reference
+        if self._flow_last is not None and 2 <= self._since <= self.cfg.max_gap:  # constant velocity, not beyond
             start = self._flow_last * np.float32(self._since / (self._since - 1))
         stats, flow, mag = self._flow(self._last, grey, quartile=waited, start=start)
         carried = stats.median * (self._since + 1) / self._since  # the next frame's median at constant velocity
