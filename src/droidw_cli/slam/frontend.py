@@ -54,7 +54,6 @@ from __future__ import annotations
 
 import dataclasses
 
-import cv2
 import numpy as np
 import torch
 
@@ -74,7 +73,7 @@ from droidw_cli.slam.keyframes import KeyframeBuffer
 from droidw_cli.slam.optimizer import SharedState, run_window, window_state
 from droidw_cli.slam.parallax import homography_parallax
 from droidw_cli.slam.poses import compose, extrapolate, interpolate
-from droidw_cli.slam.starts import adjacent_start
+from droidw_cli.slam.starts import adjacent_start, induced_start
 from droidw_cli.slam.two_view import two_view
 
 #: the two-view model of initialisation spans keyframes 0 … TWO_VIEW_SPAN (slam/two_view.py; DIS needs no
@@ -154,14 +153,9 @@ class Frontend(KeyframeMaps):
         coords, valid = self.backend.reproject(state, ii - lo, jj - lo, self.params.min_depth)
         return coords.cpu() - self.grid_coords, valid.cpu()
 
-    @staticmethod
-    def full_res_flow(flow_grid: torch.Tensor, valid: torch.Tensor, size: tuple[int, int]) -> np.ndarray:
-        f = torch.where(valid[..., None], flow_grid, torch.zeros_like(flow_grid)).numpy() * 8.0
-        return cv2.resize(np.ascontiguousarray(f), (size[1], size[0]), interpolation=cv2.INTER_LINEAR)
-
     def match(self, pairs: list[tuple[int, int]], images: dict[int, np.ndarray]) -> None:
-        """Cache targets for these pairs (not cached yet) from the given keyframe images, started
-        from the induced flow; for the backend's proximity edges, whose images left the window."""
+        """Cache targets for these pairs (not cached yet) from the given keyframe images (the backend's
+        proximity edges, whose images left the window), started as :meth:`_match` says."""
         self._match(pairs, use_prior=True, images=images)
 
     def _match(self, pairs: list[tuple[int, int]], use_prior: bool, images: dict[int, np.ndarray] | None = None) -> None:
@@ -179,7 +173,7 @@ class Frontend(KeyframeMaps):
             if prior:
                 flow, valid = self._induced_flow([todo[n] for n in prior])
                 for m, n in enumerate(prior):
-                    init[n] = self.full_res_flow(flow[m], valid[m], size)
+                    init[n] = induced_start(flow[m], valid[m], size)
         first = dict(zip(todo, init))
         done: set[tuple[int, int]] = set()
         calls, keys = [], []

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import torch
 
 from droidw_cli.correspondence.confidence import invert_flow
 
@@ -37,3 +38,10 @@ def adjacent_start(flow_half: np.ndarray, size: tuple[int, int], invert: bool) -
     scale = np.float32(size[1] / flow_half.shape[1])
     full = cv2.resize(flow_half, (size[1], size[0]), interpolation=cv2.INTER_LINEAR) * scale
     return invert_flow(full) if invert else np.ascontiguousarray(full, dtype=np.float32)
+
+
+def induced_start(flow_grid: torch.Tensor, valid: torch.Tensor, size: tuple[int, int]) -> np.ndarray:
+    """The flow (h, w, 2) in grid px that the poses and disparities induce (zero where not ``valid``), at the
+    working size ``size`` (H, W) in its pixels, as the start of an edge's flow."""
+    f = torch.where(valid[..., None], flow_grid, torch.zeros_like(flow_grid)).numpy() * 8.0
+    return cv2.resize(np.ascontiguousarray(f), (size[1], size[0]), interpolation=cv2.INTER_LINEAR)
