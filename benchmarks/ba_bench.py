@@ -111,7 +111,7 @@ def measure(backend_name: str, keyframes: int, edges: int | None, grid: tuple[in
     from droidw_cli.ba.registry import get_backend
     from droidw_cli.ba.synthetic import make_problem, perturb
 
-    from droidw_cli.slam.threads import torch_threads
+    from droidw_cli.runtime.threads import torch_threads
 
     torch.set_num_threads(threads or torch_threads(0))  # default: the tracker's count (cores − 1 on a small machine)
     backend = get_backend(backend_name)

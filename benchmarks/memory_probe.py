@@ -33,7 +33,7 @@ from _bench_common import track_source  # noqa: E402
 
 def rss_mb(trim: bool = False) -> float:
     if trim:
-        from droidw_cli.slam.heap import release_free_memory
+        from droidw_cli.runtime.heap import release_free_memory
 
         release_free_memory()
     with open("/proc/self/statm") as f:

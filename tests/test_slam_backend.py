@@ -119,7 +119,7 @@ def test_strided_frame_distance_matches_the_full_grid():
 
 
 def test_the_global_ba_runs_on_its_own_thread_count_and_restores_the_callers(monkeypatch):
-    """The global BA runs while the frontend's workers idle, so it gets every usable core (slam/threads.py)."""
+    """The global BA runs while the frontend's workers idle, so it gets every usable core (runtime/threads.py)."""
     import droidw_cli.slam.backend as backend_module
 
     fe, cfg, _ = _loop_frontend(12, ["backend.every=0", "backend.iters=1"])
@@ -139,7 +139,7 @@ def test_the_global_ba_runs_on_its_own_thread_count_and_restores_the_callers(mon
 
 
 def test_torch_threads_leave_a_core_to_the_workers_except_when_alone(monkeypatch):
-    import droidw_cli.slam.threads as threads
+    import droidw_cli.runtime.threads as threads
 
     for cores, busy, alone in [(1, 1, 1), (2, 1, 2), (4, 3, 4), (16, 8, 8)]:
         monkeypatch.setattr(threads, "usable_cores", lambda c=cores: c)

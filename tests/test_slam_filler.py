@@ -12,10 +12,10 @@ from droidw_cli.config import load_config
 from droidw_cli.correspondence import get_correspondence_source
 from droidw_cli.errors import ConfigError
 from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics
+from droidw_cli.geometry.poses import compose, interpolate
 from droidw_cli.io.prepare import FramePreparer
 from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.frontend import Frontend
-from droidw_cli.slam.poses import compose, interpolate
 from droidw_cli.synth import SynthConfig, build_scene
 
 A, B = 120, 132  # two keyframes of the generator's static hand-held walk, 12 frames apart
@@ -235,8 +235,8 @@ def test_filler_gains_must_not_be_negative():
 
 def test_smoothing_spreads_a_single_departure_over_its_neighbours():
     """One pass of [1 2 1]/4 over the departures Log(G_t G_int,t⁻¹), zero at the gap's keyframes."""
+    from droidw_cli.geometry.poses import log_departure, retract
     from droidw_cli.slam.filler import smooth_departures
-    from droidw_cli.slam.poses import log_departure, retract
 
     torch.manual_seed(0)
     init = pp.randn_SE3(5, sigma=0.3).tensor()
@@ -262,8 +262,8 @@ def test_filler_smoothing_passes_must_not_be_negative():
 
 def test_unmeasured_frames_take_the_departures_interpolated_in_time():
     """filler.stride: frames between measured ones take their departures linearly in time, zero at the keyframes."""
+    from droidw_cli.geometry.poses import log_departure, retract
     from droidw_cli.slam.filler import between_departures
-    from droidw_cli.slam.poses import log_departure, retract
 
     torch.manual_seed(1)
     init = pp.randn_SE3(5, sigma=0.3).tensor()

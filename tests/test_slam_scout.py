@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from droidw_cli.config import MotionFilterConfig
-from droidw_cli.io.prefetch import prefetched
+from droidw_cli.runtime.prefetch import prefetched
 from droidw_cli.slam.motion_filter import MotionFilter
 from droidw_cli.slam.scout import Scout
 

@@ -21,7 +21,7 @@ import torch
 
 from droidw_cli.correspondence.confidence import invert_flow
 from droidw_cli.correspondence.grid import validate_image
-from droidw_cli.slam.threads import usable_cores
+from droidw_cli.runtime.threads import usable_cores
 
 
 @dataclass(frozen=True)

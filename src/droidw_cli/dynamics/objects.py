@@ -81,7 +81,7 @@ from droidw_cli.dynamics.backtrack import backtrack
 from droidw_cli.dynamics.inloop import KeyframeMasks
 from droidw_cli.dynamics.refine import object_centre
 from droidw_cli.dynamics.tracker import DynamicObjectTracker
-from droidw_cli.slam.poses import invert, to_matrix
+from droidw_cli.geometry.poses import invert, to_matrix
 
 #: columns of :attr:`DynamicRecord.table`
 TABLE_COLUMNS = ("keyframe", "id", "cx", "cy", "x", "y", "z", "area")

@@ -53,7 +53,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from droidw_cli.slam.poses import invert, to_matrix
+from droidw_cli.geometry.poses import invert, to_matrix
 
 #: the segment of admissible static positions runs up to this many times keyframe k's 98th-percentile disparity
 RHO_FACTOR = 3.0

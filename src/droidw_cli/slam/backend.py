@@ -20,7 +20,7 @@ iterations), and once at the end (``iters``).
 The images of the keyframes in the problem are kept JPEG-encoded at the
 working resolution (``image_quality``), about a tenth of their raw size, and
 each run hands the heap's free pages back before and after it and maps its large
-temporaries on their own (:mod:`droidw_cli.slam.heap`).
+temporaries on their own (:mod:`droidw_cli.runtime.heap`).
 """
 
 from __future__ import annotations
@@ -32,12 +32,12 @@ import torch
 
 from droidw_cli.config import BackendConfig
 from droidw_cli.io.jpeg import decode_rgb, encode_rgb
+from droidw_cli.runtime.heap import large_blocks_mapped, release_free_memory
+from droidw_cli.runtime.threads import torch_threads_set
 from droidw_cli.slam import graph
 from droidw_cli.slam.distance import frame_distance
 from droidw_cli.slam.frontend import Frontend
-from droidw_cli.slam.heap import large_blocks_mapped, release_free_memory
 from droidw_cli.slam.optimizer import run_window
-from droidw_cli.slam.threads import torch_threads_set
 
 #: the candidates' frame distance is averaged over every DISTANCE_STRIDE-th grid pixel
 DISTANCE_STRIDE = 4

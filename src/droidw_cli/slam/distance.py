@@ -25,8 +25,8 @@ import torch
 from torch import Tensor
 
 from droidw_cli.geometry.lie import pose_compose, pose_inverse
+from droidw_cli.geometry.poses import log_departure, retract
 from droidw_cli.geometry.projection import pixel_grid, project_edges
-from droidw_cli.slam.poses import log_departure, retract
 
 #: pairs whose reprojection is valid on fewer pixels than this count as infinitely far apart
 MIN_VALID = 0.5

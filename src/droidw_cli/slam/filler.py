@@ -91,10 +91,10 @@ from torch import Tensor
 from droidw_cli.ba.types import BAState, EdgeSet
 from droidw_cli.ba.uncertainty import uncertainty_map, weight_factor, weighting_input
 from droidw_cli.config import FillerConfig
+from droidw_cli.geometry.poses import compose, interpolate, invert, log_departure, retract
 from droidw_cli.slam.evidence import evidence_maps
 from droidw_cli.slam.filler_flow import AheadTargets, grey
 from droidw_cli.slam.optimizer import window_state
-from droidw_cli.slam.poses import compose, interpolate, invert, log_departure, retract
 
 IDENTITY = torch.tensor([0, 0, 0, 0, 0, 0, 1.0])
 

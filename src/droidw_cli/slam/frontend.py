@@ -63,6 +63,7 @@ from droidw_cli.config import FrontendConfig, TrackConfig
 from droidw_cli.correspondence.base import Correspondence, MatchCall
 from droidw_cli.dynamics.epipolar import MAX_MOVING, epipolar_distance, moving_mask
 from droidw_cli.dynamics.inloop import KeyframeMasks, observed_disparity
+from droidw_cli.geometry.poses import compose, extrapolate, interpolate
 from droidw_cli.slam import graph
 from droidw_cli.slam.depth_prior import seed_disparity
 from droidw_cli.slam.distance import candidate_distance, frame_distance, transfer_disparity
@@ -72,7 +73,6 @@ from droidw_cli.slam.focal import clamp_focal, focal_observable
 from droidw_cli.slam.keyframes import KeyframeBuffer
 from droidw_cli.slam.optimizer import SharedState, run_window, window_state
 from droidw_cli.slam.parallax import homography_parallax
-from droidw_cli.slam.poses import compose, extrapolate, interpolate
 from droidw_cli.slam.starts import adjacent_start, induced_start
 from droidw_cli.slam.two_view import two_view
 

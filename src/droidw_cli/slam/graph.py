@@ -14,7 +14,7 @@ import torch
 from torch import Tensor
 
 from droidw_cli.ba.types import EdgeSet
-from droidw_cli.slam.slab import RowSlab
+from droidw_cli.runtime.slab import RowSlab
 
 
 class EdgeCache:
@@ -24,7 +24,7 @@ class EdgeCache:
     that the window BA can retire edges after ``max_age`` iterations (the
     global BA still uses them all).  Targets, confidences and the index
     tensors of :meth:`edge_set` are on ``device``.  They are the rows of one
-    :class:`~droidw_cli.slam.slab.RowSlab` (one row per edge, reused once the
+    :class:`~droidw_cli.runtime.slab.RowSlab` (one row per edge, reused once the
     edge is forgotten), not tensors of their own, which left holes in the heap
     over a long video.
     """

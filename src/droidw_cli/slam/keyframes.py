@@ -8,7 +8,7 @@ Nothing at the working resolution is kept here.  The features are the bulk
 (64 × h × w float16, ~390 KB at 48 × 64): once a keyframe leaves the bounded
 global problem, :meth:`KeyframeBuffer.archive` replaces them by the frozen
 uncertainty map u_t (h × w float16); thumbnails are kept JPEG-encoded.
-The stored features are the rows of one :class:`~droidw_cli.slam.slab.RowSlab`
+The stored features are the rows of one :class:`~droidw_cli.runtime.slab.RowSlab`
 (an archived keyframe's row is reused by a later keyframe), not tensors of
 their own, which left holes in the heap over a long video.
 
@@ -34,7 +34,7 @@ import torch
 from torch import Tensor
 
 from droidw_cli.io.jpeg import JpegStack, decode_rgb, encode_rgb
-from droidw_cli.slam.slab import RowSlab
+from droidw_cli.runtime.slab import RowSlab
 
 #: JPEG quality of the stored thumbnails (37 KB raw at 96 × 128 → a few KB; a long video keeps thousands)
 THUMBNAIL_QUALITY = 95
@@ -67,7 +67,7 @@ class KeyframeBuffer:
         self.depth_prior: Tensor | None = None  # allocated with the first prior (RGB-D); monocular runs keep none
         self.feature_dtype = feature_dtype
         self.features: list | None = [] if feature_channels else None  # Tensor, pending, or None: archived
-        # the stored features are rows of one slab (slam/slab.py): the slab row of each keyframe's, or None
+        # the stored features are rows of one slab (runtime/slab.py): the slab row of each keyframe's, or None
         self._feature_slab = RowSlab((feature_dtype,), self.device, GROW_MIN) if feature_channels else None
         self._feature_row: list[int | None] = []
         self.frozen_u: dict[int, Tensor] = {}  # archived keyframe → its uncertainty map (h, w) float16

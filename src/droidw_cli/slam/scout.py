@@ -34,8 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from droidw_cli.runtime.timing import StageTimer
 from droidw_cli.slam.motion_filter import MotionFilter
-from droidw_cli.slam.timing import StageTimer
 
 #: what the scout hands on per frame: (frame, image, depth, is the frame a keyframe candidate)
 Scouted = tuple[Any, np.ndarray, Any, bool]

@@ -27,21 +27,21 @@ from droidw_cli.dynamics.inloop import observed_disparity
 from droidw_cli.dynamics.objects import DynamicRecord, finish
 from droidw_cli.errors import InputError
 from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics, unscale_intrinsics
+from droidw_cli.geometry.poses import invert, to_matrix
 from droidw_cli.io.calibration import Calibration
 from droidw_cli.io.frames import Frame, FrameSource
 from droidw_cli.io.jpeg import JpegStack
-from droidw_cli.io.prefetch import prefetched
 from droidw_cli.io.prepare import FramePreparer
+from droidw_cli.runtime.heap import limit_arenas
+from droidw_cli.runtime.prefetch import prefetched
+from droidw_cli.runtime.threads import torch_threads, torch_threads_set
+from droidw_cli.runtime.timing import StageTimer, Timed
 from droidw_cli.slam.backend import GlobalBackend
-from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.depth_prior import grid_disparity
+from droidw_cli.slam.filler import TrajectoryFiller
 from droidw_cli.slam.frontend import Frontend
-from droidw_cli.slam.heap import limit_arenas
 from droidw_cli.slam.motion_filter import MotionFilter
-from droidw_cli.slam.poses import invert, to_matrix
 from droidw_cli.slam.scout import Scout
-from droidw_cli.slam.threads import torch_threads, torch_threads_set
-from droidw_cli.slam.timing import StageTimer, Timed
 
 
 @dataclass
@@ -200,7 +200,7 @@ class Tracker:
 
     def run(self, source: FrameSource, calibration: Calibration | None) -> TrackResult:
         """Track ``source``; ``calibration`` None estimates the focal length (``--calib auto``)."""
-        limit_arenas()  # before the run's threads take arenas of their own (slam/heap.py)
+        limit_arenas()  # before the run's threads take arenas of their own (runtime/heap.py)
         with torch_threads_set(torch_threads(self.cfg.threads)):
             return self._run(source, calibration)
 
@@ -279,7 +279,7 @@ class Tracker:
                     f"--calib auto: the camera never rotated {cfg.calib.min_rotation:g}° within a window, so the "
                     f"focal length was not estimated; it stays at the initial guess of {cfg.calib.focal_init:g} × "
                     f"the image's larger side (pass a calibration file for accurate results)")
-            with torch_threads_set(gba.threads):  # the workers are done: every usable core (slam/threads.py)
+            with torch_threads_set(gba.threads):  # the workers are done: every usable core (runtime/threads.py)
                 with timer("global_ba"):
                     gba.finish()
                 self.backend.release()  # the last BA has run: its cached window features are dead weight

@@ -1,4 +1,4 @@
-"""The heap's free pages go back to the OS around each global BA, its large blocks are mapped, its arenas capped (slam/heap.py)."""
+"""The heap's free pages go back to the OS around each global BA, its large blocks are mapped, its arenas capped (runtime/heap.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from droidw_cli.slam.heap import release_free_memory
+from droidw_cli.runtime.heap import release_free_memory
 
 glibc = pytest.mark.skipif(not sys.platform.startswith("linux") or not ctypes.util.find_library("c"),
                            reason="glibc's malloc_trim and mallopt")
@@ -35,7 +35,7 @@ def test_freed_holes_are_returned():
 #: run in a fresh interpreter: a long-lived test process has free heap holes that a 12 MB block may fit,
 #: and glibc maps a block only when no free chunk can hold it
 _PROBE = """
-from droidw_cli.slam.heap import large_blocks_mapped
+from droidw_cli.runtime.heap import large_blocks_mapped
 
 
 def anonymous_bytes():
@@ -71,7 +71,7 @@ def test_large_blocks_are_mapped_only_inside_the_block():
 #: six threads that each allocate: glibc gives each a new arena of its own up to the cap
 _ARENAS = """
 import ctypes, sys, threading
-from droidw_cli.slam.heap import limit_arenas
+from droidw_cli.runtime.heap import limit_arenas
 
 applied = limit_arenas(2) if sys.argv[1] == "cap" else None
 barrier = threading.Barrier(6)

@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from droidw_cli.io.prefetch import prefetched
+from droidw_cli.runtime.prefetch import prefetched
 
 
 def test_items_come_out_in_order():

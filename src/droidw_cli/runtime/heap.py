@@ -30,7 +30,7 @@ took the peak of a 10-minute stream from 1762 to 1521 MB with the same
 trajectory in one pair of runs, and read 1591 MB alone (``docs/benchmarks.md``,
 "Memory: two arenas"); the three were not measured apart.  The long-lived
 per-keyframe and per-edge tensors are now rows of a few slabs that reuse their
-rows (:mod:`droidw_cli.slam.slab`), not many small blocks freed and allocated
+rows (:mod:`droidw_cli.runtime.slab`), not many small blocks freed and allocated
 anew among the temporaries (1546 MB, "Memory: slabs").
 Elsewhere (musl, macOS, Windows) all of this does nothing.
 """

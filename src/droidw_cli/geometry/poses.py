@@ -1,4 +1,4 @@
-"""Pose utilities for the tracker.
+"""Pose utilities for the tracker and the object tracks (slam/, dynamics/).
 
 Poses are stored as (…, 7) tensors in pypose's SE3 layout
 ``[tx, ty, tz, qx, qy, qz, qw]``; keyframe poses are world-to-camera G_t,

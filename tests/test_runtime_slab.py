@@ -1,4 +1,4 @@
-"""Row slabs (slam/slab.py) and the two stores built on them: the edge cache and the keyframe features."""
+"""Row slabs (runtime/slab.py) and the two stores built on them: the edge cache and the keyframe features."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import torch
 
+from droidw_cli.runtime.slab import RowSlab
 from droidw_cli.slam import graph
 from droidw_cli.slam.keyframes import KeyframeBuffer
-from droidw_cli.slam.slab import RowSlab
 
 
 def test_slab_reuses_the_lowest_free_row_and_keeps_rows_when_it_grows():
