@@ -236,7 +236,7 @@ def one_mode(args: argparse.Namespace) -> None:
     from droidw_cli.eval import evaluate_ate
     from droidw_cli.export.pointcloud import CloudParams, build_cloud
     from droidw_cli.export.run_files import keyframe_arrays
-    from droidw_cli.io.frames import open_source
+    from droidw_cli.io.input import open_source
     from droidw_cli.io.trajectory import Trajectory
     from droidw_cli.synth import SynthConfig, build_scene
 

@@ -54,7 +54,7 @@ def capture_one(args: argparse.Namespace) -> None:
 
     import droidw_cli.slam.tracker as tracker_module
     from droidw_cli.config import load_config
-    from droidw_cli.io.frames import open_source
+    from droidw_cli.io.input import open_source
     from droidw_cli.synth import SynthConfig, build_scene
 
     config, mode = INPUTS[args.input]

@@ -47,7 +47,7 @@ def one(args: argparse.Namespace) -> None:
     from droidw_cli.eval import evaluate_ate
     from droidw_cli.eval.metrics import heading_error
     from droidw_cli.io.calibration import Calibration
-    from droidw_cli.io.frames import open_source
+    from droidw_cli.io.input import open_source
     from droidw_cli.io.trajectory import Trajectory
     from droidw_cli.synth import SynthConfig
     from droidw_cli.synth.source import SynthSource

@@ -163,7 +163,7 @@ def test_an_rgbd_row_is_metric_and_evaluated_in_se3(clips, tmp_path, capsys, mon
 
 def test_interrupt_leaves_no_half_written_sequence(clips, tmp_path, monkeypatch):
     from droidw_cli.batch import BatchOptions, load_manifest, run_batch
-    from droidw_cli.commands import track
+    from droidw_cli import track
 
     def fake_track(input_path, out_dir, *args, **kwargs):
         (Path(out_dir) / "traj.txt").write_text("half\n")

@@ -12,7 +12,7 @@ import pytest
 from cli_run import run
 from droidw_cli.errors import InputError
 from droidw_cli.io.calibration import load_calibration
-from droidw_cli.io.frames import open_source
+from droidw_cli.io.input import open_source
 from droidw_cli.synth import SynthConfig, write_sequence
 
 CFG = SynthConfig.preset("static-small", seed=3, width=96, height=72, frames=6)

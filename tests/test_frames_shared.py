@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from droidw_cli.io.frames import open_source
+from droidw_cli.io.input import open_source
 from droidw_cli.io.prepare import FramePreparer
 
 

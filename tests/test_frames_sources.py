@@ -10,7 +10,8 @@ import pytest
 
 from droidw_cli.errors import ConfigError, InputError
 from droidw_cli.io.datasets import EurocSource, TumRgbdSource, associate_nearest
-from droidw_cli.io.frames import CorruptFrameWarning, open_source
+from droidw_cli.io.frames import CorruptFrameWarning
+from droidw_cli.io.input import open_source
 from droidw_cli.io.sources import ImageFolderSource, VideoSource, natural_key, stem_timestamps
 
 H, W = 48, 64

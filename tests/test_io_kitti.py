@@ -11,7 +11,7 @@ import pytest
 from droidw_cli.errors import InputError
 from droidw_cli.io.calibration import load_calibration
 from droidw_cli.io.datasets import KittiSource
-from droidw_cli.io.frames import open_source
+from droidw_cli.io.input import open_source
 from droidw_cli.io.sources import ImageFolderSource
 
 H, W = 48, 64

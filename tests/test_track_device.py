@@ -21,7 +21,7 @@ from droidw_cli.ba.types import BAState, BAStepResult, EdgeSet, UncertaintyStepR
 from droidw_cli.config import load_config
 from droidw_cli.correspondence import get_correspondence_source
 from droidw_cli.features import get_feature_extractor
-from droidw_cli.io.frames import open_source
+from droidw_cli.io.input import open_source
 from droidw_cli.slam.tracker import Tracker
 from droidw_cli.synth import SynthConfig, write_sequence
 from droidw_backend_cpu import CpuBackend

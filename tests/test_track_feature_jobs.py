@@ -17,7 +17,7 @@ from droidw_cli.config import load_config
 from droidw_cli.correspondence import get_correspondence_source
 from droidw_cli.features.base import FeatureExtractor
 from droidw_cli.io.calibration import load_calibration
-from droidw_cli.io.frames import open_source
+from droidw_cli.io.input import open_source
 from droidw_cli.slam.tracker import Tracker
 from droidw_cli.synth import SynthConfig, write_sequence
 

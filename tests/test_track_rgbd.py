@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from cli_run import run
-from droidw_cli.commands.track import depth_config
 from droidw_cli.eval.dynamic import masks_on_grid
-from droidw_cli.io.frames import open_source
+from droidw_cli.io.input import open_source
 from droidw_cli.synth import SynthConfig, write_sequence
+from droidw_cli.track import depth_config
 
 AREA = 76800  # 240 x 320 working size
 SHORT = ["--set", f"io.target_area={AREA}", "--set", "motion_filter.thresh=1.5", "--set", "frontend.keyframe_thresh=1.5"]
@@ -54,7 +54,7 @@ def test_help_shows_the_depth_options(capsys):
 
 def test_depth_scale_sets_the_metres(seq):
     source = open_source(seq, max_frames=1)
-    from droidw_cli.commands.track import open_depth
+    from droidw_cli.io.rgbd import open_depth
 
     open_depth(source, 2500.0)
     frame = next(iter(source))
@@ -176,7 +176,7 @@ def test_depth_listing_that_pairs_no_frame_is_an_error(seq, tmp_path, capsys):
 
 
 def test_frames_without_a_depth_image_are_counted_in_a_warning(seq, tmp_path):
-    from droidw_cli.commands.track import open_depth
+    from droidw_cli.io.rgbd import open_depth
 
     half = _copy_with(seq, tmp_path / "half", lambda body: body[::2])
     source = open_source(half)
@@ -186,7 +186,7 @@ def test_frames_without_a_depth_image_are_counted_in_a_warning(seq, tmp_path):
 
 
 def test_a_depth_scale_that_gives_implausible_depth_is_a_warning(seq):
-    from droidw_cli.commands.track import open_depth
+    from droidw_cli.io.rgbd import open_depth
 
     assert open_depth(open_source(seq), 5000.0) == []  # the generator's room: metres of depth
     for scale in (50.0, 5e5):  # 100× too far, 100× too near

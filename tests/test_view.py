@@ -16,8 +16,8 @@ def run_dir(tmp_path_factory) -> Path:
     """A real `droidw track` run of a short synthetic clip (one torch thread: a few seconds)."""
     import torch
 
-    from droidw_cli.commands.track import run_track
     from droidw_cli.synth import SynthConfig, write_sequence
+    from droidw_cli.track import run_track
 
     root = tmp_path_factory.mktemp("view")
     cfg = SynthConfig.preset("dynamic", seed=3, frames=20, width=160, height=120, fps=10.0)

@@ -83,7 +83,7 @@ def run_sequence(row: dict, out_dir: str, threads: int = 1, backend: str = "auto
 
 
 def _track_and_eval(row: dict, folder: Path, backend: str, record: dict, threads: int) -> None:
-    from droidw_cli.commands.track import run_track
+    from droidw_cli.track import run_track
 
     inp = Path(row["input"])
     if not inp.exists():

@@ -52,10 +52,10 @@ def demo(out_dir, frames, seed, backend, config_name, no_baseline, overwrite, qu
     --frames and --seed (else it asks for --overwrite) and replaces the runs.
     A run that never initialises (too short a clip) gets no ATE.
     """
-    from droidw_cli.commands.track import run_track
     from droidw_cli.eval import evaluate_ate
     from droidw_cli.io.trajectory import read_trajectory
     from droidw_cli.synth import SynthConfig, write_sequence
+    from droidw_cli.track import run_track
 
     progress = not quiet and sys.stderr.isatty()
     seq = out_dir / "sequence"

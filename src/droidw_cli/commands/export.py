@@ -10,31 +10,6 @@ from droidw_cli.errors import InputError
 from droidw_cli.io.outputs import check_output_file, check_output_folder
 
 
-def load_run(run_dir: Path) -> dict:
-    """The arrays of ``RUN_DIR/keyframes.npz`` (a clear error if it is missing or unreadable)."""
-    import numpy as np
-
-    path = run_dir / "keyframes.npz" if run_dir.is_dir() else run_dir
-    if not path.is_file():
-        raise InputError(f"{path}: no such file; run `droidw track ... --out {run_dir}` first")
-    try:
-        with np.load(path) as z:
-            return {k: z[k] for k in z.files}
-    except Exception as exc:  # noqa: BLE001 - any unreadable npz is a user-facing error
-        raise InputError(f"{path}: cannot read keyframes ({exc})") from None
-
-
-def run_is_metric(run_dir: Path) -> bool:
-    """``run.json``'s ``metric`` flag (False when there is no readable run.json)."""
-    import json
-
-    path = (run_dir if run_dir.is_dir() else run_dir.parent) / "run.json"
-    try:
-        return bool(json.loads(path.read_text()).get("metric", False))
-    except (OSError, ValueError, AttributeError):
-        return False
-
-
 @click.group("export")
 def export() -> None:
     """Export a run: PLY point clouds, dynamic objects, uncertainty overlays, a rendered view of the cloud.
@@ -68,6 +43,7 @@ def ply(run_dir, out, what, max_uncertainty, min_views, stride):
     writes both with a `dynamic` flag.
     """
     from droidw_cli.export.pointcloud import CloudParams, build_cloud, write_ply
+    from droidw_cli.export.run_files import load_run
 
     if stride < 1 or min_views < 0:
         raise InputError("--stride must be ≥ 1 and --min-views ≥ 0")
@@ -88,6 +64,7 @@ def objects(run_dir, out):
     """Write the run's dynamic objects as JSON: per object id its first and last frame and time, and per
     keyframe its image centre and world centroid (schema in the README)."""
     from droidw_cli.export.objects import format_objects, objects_json
+    from droidw_cli.export.run_files import load_run, run_is_metric
     from droidw_cli.io.trajectory import atomic_write_text
 
     check_output_file(out)
@@ -107,6 +84,7 @@ def objects(run_dir, out):
 def uncertainty(run_dir, out, video):
     """Write a PNG overlay of the uncertainty u for each keyframe (with a legend)."""
     from droidw_cli.export.overlay import write_overlays
+    from droidw_cli.export.run_files import load_run
 
     check_output_folder(out)
     npz = load_run(run_dir)
@@ -148,6 +126,7 @@ def render(run_dir, out, what, size, azimuth, elevation, zoom, point_size, no_tr
     """
     from droidw_cli.export.pointcloud import CloudParams, build_cloud
     from droidw_cli.export.render import RenderParams, render_cloud, write_png
+    from droidw_cli.export.run_files import load_run
 
     if stride < 1 or min_views < 0:
         raise InputError("--stride must be ≥ 1 and --min-views ≥ 0")

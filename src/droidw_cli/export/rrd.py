@@ -56,7 +56,7 @@ class Run:
 
 
 def load_run_folder(folder: Path) -> Run:
-    from droidw_cli.commands.export import load_run
+    from droidw_cli.export.run_files import load_run
     from droidw_cli.io.trajectory import read_trajectory
 
     if not folder.is_dir():

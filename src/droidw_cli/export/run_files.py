@@ -1,4 +1,4 @@
-"""Writes a ``droidw track`` run folder, all-or-nothing.
+"""Writes a ``droidw track`` run folder, all-or-nothing, and reads it back (:func:`load_run`).
 
 Files: ``traj.txt`` (TUM, camera-to-world, every frame), ``keyframes.npz``,
 ``calib.txt`` and ``run.json``.  Everything is written into a hidden
@@ -19,6 +19,7 @@ import numpy as np
 
 from droidw_cli import __version__
 from droidw_cli.config import GRID_UNIT
+from droidw_cli.errors import InputError
 from droidw_cli.io.calibration import format_calibration
 from droidw_cli.io.trajectory import Trajectory, format_trajectory
 
@@ -100,3 +101,24 @@ def write_run(out_dir: str | Path, result, info: dict) -> list[Path]:
         return paths
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def load_run(run_dir: Path) -> dict:
+    """The arrays of ``RUN_DIR/keyframes.npz`` (a clear error if it is missing or unreadable)."""
+    path = run_dir / "keyframes.npz" if run_dir.is_dir() else run_dir
+    if not path.is_file():
+        raise InputError(f"{path}: no such file; run `droidw track ... --out {run_dir}` first")
+    try:
+        with np.load(path) as z:
+            return {k: z[k] for k in z.files}
+    except Exception as exc:  # noqa: BLE001 - any unreadable npz is a user-facing error
+        raise InputError(f"{path}: cannot read keyframes ({exc})") from None
+
+
+def run_is_metric(run_dir: Path) -> bool:
+    """``run.json``'s ``metric`` flag (False when there is no readable run.json)."""
+    path = (run_dir if run_dir.is_dir() else run_dir.parent) / "run.json"
+    try:
+        return bool(json.loads(path.read_text()).get("metric", False))
+    except (OSError, ValueError, AttributeError):
+        return False
