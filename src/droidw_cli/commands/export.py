@@ -62,7 +62,7 @@ def ply(run_dir, out, what, max_uncertainty, min_views, stride):
 @click.option("--out", "out", type=click.Path(path_type=Path), default=Path("objects.json"), show_default=True)
 def objects(run_dir, out):
     """Write the run's dynamic objects as JSON: per object id its first and last frame and time, and per
-    keyframe its image centre and world centroid (schema in the README)."""
+    keyframe its image centre and world centroid (schema in docs/formats.md)."""
     from droidw_cli.export.objects import format_objects, objects_json
     from droidw_cli.export.run_files import load_run, run_is_metric
     from droidw_cli.io.trajectory import atomic_write_text
