@@ -119,7 +119,7 @@ def test_the_output_mask_leaves_the_in_loop_epipolar_masks_out_only_with_consist
 
 
 def test_dynamics_mode_is_validated_and_settable():
-    assert load_config("default").dynamics.mode == "epipolar"  # the monocular default (README: mask modes)
+    assert load_config("default").dynamics.mode == "epipolar"  # the monocular default (docs/guide.md: dynamic masks)
     assert load_config("rgbd").dynamics.mode == "both"  # the RGB-D default
     cfg = load_config("default", ["dynamics.mode=both"]).dynamics
     assert cfg.epipolar and cfg.consistency
