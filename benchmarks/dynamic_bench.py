@@ -321,6 +321,7 @@ def one_auroc(args: argparse.Namespace) -> None:
         out["auroc_others"], out["kf_others"] = mean_auroc(u, inst[1:].any(0), static)
         out["auroc_pooled"] = auroc(u, truth) if truth.any() else float("nan")
         if args.save_u:
+            Path(args.save_u).parent.mkdir(parents=True, exist_ok=True)
             np.savez_compressed(args.save_u, u=u, truth=truth, subject=inst[0], kf_index=result.kf_index)
     print(json.dumps(out))
 
@@ -331,6 +332,7 @@ def auroc_table(args: argparse.Namespace) -> None:
         for seed in args.seeds:
             case = ["--one-auroc", "--preset", preset, "--seed", str(seed), "--frames", str(args.frames),
                     *(x for s in args.set for x in ("--set", s))]
+            case += ["--save-u", str(Path(args.save_u) / f"{preset}-seed{seed}.npz")] if args.save_u else []
             r = run_case_subprocess("dynamic_bench.py", case)
             nan = float("nan")
             rows.append([preset, seed, f"{r['ate_cm']:.2f}", f"{r['ate_path']:.3f}", f"{r.get('auroc', nan):.3f}",
@@ -382,7 +384,8 @@ def main() -> None:
     ap.add_argument("--rgbd-modes", nargs="*", default=["epipolar", "consistency", "both"])
     ap.add_argument("--apart", action="store_true", help="with --modes: walkers keep apart (SynthConfig.apart)")
     ap.add_argument("--auroc", action="store_true", help="the AUROC-of-u table per preset and seed (--presets)")
-    ap.add_argument("--save-u", default="", help=argparse.SUPPRESS)  # --one-auroc: keyframes' u and masks (.npz)
+    ap.add_argument("--save-u", default="", metavar="DIR",
+                    help="with --auroc: save each run's keyframe u and ground-truth masks as DIR/PRESET-seedN.npz")
     ap.add_argument("--one-auroc", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--one-mode", action="store_true", help=argparse.SUPPRESS)
@@ -392,7 +395,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
     ap.add_argument("--uncertainty", type=int, default=1, help=argparse.SUPPRESS)
     args = ap.parse_args()
-    if args.one_auroc:
+    if args.one_auroc:  # (the table passes --frames; 0 = the preset's own length)
         one_auroc(args)
         return
     if args.one_mode:  # run_case_subprocess also passes --one
