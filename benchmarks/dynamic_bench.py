@@ -3,6 +3,7 @@
     python benchmarks/dynamic_bench.py [--frames 300] [--size 640x480] [--seeds 1 2 3] [--set KEY=VALUE ...]
     python benchmarks/dynamic_bench.py --modes [--presets walk wobble stopgo rotate] [--mono-modes ...]
                                        [--rgbd-modes ...] [--frames 0]
+    python benchmarks/dynamic_bench.py --auroc [--presets follow follow-pan walk forward] [--seeds 1 2]
 
 Default table: one row per sequence (3 dynamic seeds and a static control):
 ATE with and without uncertainty and their ratio, the uncertainty AUROC
@@ -21,6 +22,15 @@ brackets the older count over all keyframes where it has an id,
 another walker in view has too (:func:`id_shared`), the id switches as CLEAR MOT / MOTS count them
 (:func:`mots_id_switches`, with the share of walkers in view matched to an id), the share of ground-truth
 dynamic pixels in the static cloud, and frames/s.
+
+``--auroc``: one row per preset and seed (cached like ``--modes``, each preset's own length; default
+config plus ``--set``, known calibration): ATE (cm and % of the path), the AUROC of the keyframes'
+uncertainty u for the ground-truth dynamic mask on the BA grid per keyframe with movers, averaged
+(the same restricted to mover 0 — a follow shot's subject — against the static cells, and to the other
+movers against the static cells), the pooled AUROC over all keyframes as the first table has it, the
+keyframes (with movers) and frames/s:
+
+    python benchmarks/dynamic_bench.py --auroc --presets follow walk forward --seeds 1
 """
 
 from __future__ import annotations
@@ -272,6 +282,71 @@ def one_mode(args: argparse.Namespace) -> None:
     print(json.dumps(out))
 
 
+def mean_auroc(u: np.ndarray, positive: np.ndarray, negative: np.ndarray) -> tuple[float, int]:
+    """The AUROC of u for ``positive`` cells against ``negative`` ones per keyframe, averaged over the keyframes
+    that have both; and their number."""
+    from droidw_cli.eval.dynamic import auroc
+
+    scores = [auroc(uk[p | n], p[p | n]) for uk, p, n in zip(u, positive, negative) if p.any() and n.any()]
+    return (float(np.mean(scores)) if scores else float("nan")), len(scores)
+
+
+def one_auroc(args: argparse.Namespace) -> None:
+    """One --auroc case: a cached preset tracked with the default config; prints a JSON line."""
+    from droidw_cli.config import load_config
+    from droidw_cli.eval import evaluate_ate
+    from droidw_cli.eval.dynamic import auroc
+    from droidw_cli.io.calibration import Calibration
+    from droidw_cli.io.frames import open_source
+    from droidw_cli.io.trajectory import Trajectory
+    from droidw_cli.synth import SynthConfig, build_scene
+
+    cfg = SynthConfig.preset(args.preset, seed=args.seed, **({"frames": args.frames} if args.frames else {}))
+    source = open_source(cached_sequence(cfg, args.preset))
+    result, seconds = track_source(source, Calibration(*(float(v) for v in cfg.intrinsics)), list(args.set))
+    scene = build_scene(cfg)
+    poses = np.asarray(scene.pose(np.arange(cfg.frames)), dtype=np.float64)
+    gt = Trajectory(np.array([cfg.timestamp(k) for k in range(cfg.frames)]), poses)
+    path = float(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1).sum())
+    ate = evaluate_ate(gt, Trajectory(result.timestamps, result.poses_c2w)).rmse
+    out = {"ate_cm": ate * 100, "ate_path": 100 * ate / max(path, 1e-9), "keyframes": int(len(result.kf_index)),
+           "fps": len(result.timestamps) / seconds}
+    u = result.kf_uncertainty
+    if u is not None:
+        inst = instance_masks(cfg, scene, result.kf_index, load_config("default", list(args.set)).io.target_area)
+        truth = inst.any(0)
+        static = ~truth
+        out["auroc"], out["kf_movers"] = mean_auroc(u, truth, static)
+        out["auroc_subject"], out["kf_subject"] = mean_auroc(u, inst[0], static)
+        out["auroc_others"], out["kf_others"] = mean_auroc(u, inst[1:].any(0), static)
+        out["auroc_pooled"] = auroc(u, truth) if truth.any() else float("nan")
+        if args.save_u:
+            Path(args.save_u).parent.mkdir(parents=True, exist_ok=True)
+            np.savez_compressed(args.save_u, u=u, truth=truth, subject=inst[0], kf_index=result.kf_index)
+    print(json.dumps(out))
+
+
+def auroc_table(args: argparse.Namespace) -> None:
+    rows = []
+    for preset in args.presets:
+        for seed in args.seeds:
+            case = ["--one-auroc", "--preset", preset, "--seed", str(seed), "--frames", str(args.frames),
+                    *(x for s in args.set for x in ("--set", s))]
+            case += ["--save-u", str(Path(args.save_u) / f"{preset}-seed{seed}.npz")] if args.save_u else []
+            r = run_case_subprocess("dynamic_bench.py", case)
+            nan = float("nan")
+            rows.append([preset, seed, f"{r['ate_cm']:.2f}", f"{r['ate_path']:.3f}", f"{r.get('auroc', nan):.3f}",
+                         f"{r.get('auroc_subject', nan):.3f} ({r.get('kf_subject', 0)})",
+                         f"{r.get('auroc_others', nan):.3f} ({r.get('kf_others', 0)})",
+                         f"{r.get('auroc_pooled', nan):.3f}", f"{r['keyframes']} ({r.get('kf_movers', 0)})",
+                         f"{r['fps']:.2f}"])
+            print(" | ".join(str(c) for c in rows[-1]), file=sys.stderr, flush=True)
+    print("\nUncertainty against the dynamic mask (default config, known calibration, per keyframe with movers)")
+    print_table(["preset", "seed", "ATE [cm]", "ATE [% path]", "AUROC u, dynamic (kf mean)",
+                 "AUROC mover 0 / subject (kf)", "AUROC other movers (kf)", "AUROC pooled", "keyframes (with movers)",
+                 "frames/s"], rows)
+
+
 def modes_table(args: argparse.Namespace) -> None:
     common = ["--frames", str(args.frames)] + [x for s in args.set for x in ("--set", s)]
     common += ["--apart"] if args.apart else []
@@ -303,10 +378,15 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--modes", action="store_true", help="the RGB-D / monocular mask-mode table")
-    ap.add_argument("--presets", nargs="+", default=["walk", "wobble", "stopgo", "rotate"])
+    ap.add_argument("--presets", nargs="+", default=["walk", "wobble", "stopgo", "rotate"],
+                    help="--modes / --auroc: any synth preset (e.g. forward, follow, follow-pan)")
     ap.add_argument("--mono-modes", nargs="*", default=["epipolar", "consistency", "both"])
     ap.add_argument("--rgbd-modes", nargs="*", default=["epipolar", "consistency", "both"])
     ap.add_argument("--apart", action="store_true", help="with --modes: walkers keep apart (SynthConfig.apart)")
+    ap.add_argument("--auroc", action="store_true", help="the AUROC-of-u table per preset and seed (--presets)")
+    ap.add_argument("--save-u", default="", metavar="DIR",
+                    help="with --auroc: save each run's keyframe u and ground-truth masks as DIR/PRESET-seedN.npz")
+    ap.add_argument("--one-auroc", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--one", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--one-mode", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--config", default="default", help=argparse.SUPPRESS)
@@ -315,16 +395,19 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1, help=argparse.SUPPRESS)
     ap.add_argument("--uncertainty", type=int, default=1, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.one_auroc:  # (the table passes --frames; 0 = the preset's own length)
+        one_auroc(args)
+        return
     if args.one_mode:  # run_case_subprocess also passes --one
         one_mode(args)
         return
     if args.one:
         one(args)
         return
-    if args.modes:
+    if args.modes or args.auroc:
         if args.frames == 300:  # the default of the first table; the presets keep their own length
             args.frames = 0
-        modes_table(args)
+        (auroc_table if args.auroc else modes_table)(args)
         return
     common = ["--size", args.size, "--frames", str(args.frames)] + [x for s in args.set for x in ("--set", s)]
     cases = [("dynamic", s) for s in args.seeds] + [("static", args.seeds[0])]

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from droidw_cli.synth import PRESETS, SynthConfig, build_scene
-from droidw_cli.synth.config import FORWARD_MOTIONS, MOTIONS
+from droidw_cli.synth.config import MOTIONS, STREET_MOTIONS
 
-ROOM_MOTIONS = [m for m in MOTIONS if m not in FORWARD_MOTIONS]  # the street's are in test_synth_street.py
+ROOM_MOTIONS = [m for m in MOTIONS if m not in STREET_MOTIONS]  # streets: test_synth_street.py, test_synth_follow.py
 
 SMALL = {"width": 160, "height": 120}
 

@@ -35,7 +35,8 @@ def _parse_size(ctx, param, value: str | None) -> tuple[int, int] | None:
 @click.option("--fps", type=click.FloatRange(min=0, min_open=True), default=None, help="Frame rate [30].")
 @click.option("--noise", type=click.FloatRange(min=0), default=None, help="Gaussian pixel noise std, grey levels [0].")
 @click.option("--motion", type=click.Choice(list(MOTIONS)), default=None,
-              help="Camera path: handheld walk, near-still wobble, fast rotate, stopgo, fixed [handheld].")
+              help="Camera path: handheld walk, near-still wobble, fast rotate, stopgo, fixed; down a street: "
+                   "forward, ride, drive, follow, follow-pan [handheld].")
 @click.option("--blur", type=click.FloatRange(0, 1), default=None,
               help="Motion blur: exposure as a fraction of the frame interval, e.g. 0.5 [0 = off].")
 @click.option("--jpeg", type=click.IntRange(0, 100), default=None, help="JPEG quality of the colour images [0 = off].")
@@ -63,11 +64,15 @@ def synth(out_dir: str, preset: str, frames: int | None, seed: int, movers: int 
     Presets walk, walk-static, wobble, rotate, stopgo and fixed add camera
     motions, motion blur, noise, JPEG and gain drift (realistic 640x480);
     forward, ride and drive travel down a street with walkers and cars (a
-    walk, a bike ride, and a car at 10 frames/s with KITTI's 1241x376 camera).
+    walk, a bike ride, and a car at 10 frames/s with KITTI's 1241x376 camera);
+    follow and follow-pan are follow shots there: the camera pans to keep one
+    walker (mover 0) in the middle of the frame while the street streams past
+    (walking 2.5-4 m behind it, or side-on as it overtakes).
     Examples:
       droidw synth seq/ --frames 300 --movers 3 --video
       droidw synth seq/ --preset rotate --blur 0.3
       droidw synth seq-kitti/ --preset drive --layout kitti --grey
+      droidw synth seq-follow/ --preset follow --seed 1
     """
     from droidw_cli.synth import SynthConfig, write_sequence
 

@@ -2,7 +2,9 @@
 
 A textured room with furniture, a moving camera (handheld, wobbling,
 rotating, stop-and-go or fixed: :mod:`~droidw_cli.synth.motions`) and people
-("walkers", textured boxes) walking through it.  Per frame: colour, z-depth,
+("walkers", textured boxes) walking through it; or a street with a camera
+travelling down it (:mod:`~droidw_cli.synth.forward`) or following one walker
+(:mod:`~droidw_cli.synth.follow`).  Per frame: colour, z-depth,
 the mask of walker pixels and the camera pose — all exact, for tests,
 benchmarks and ``droidw demo``.  The colour can get motion blur, gain drift,
 noise and JPEG artefacts (:mod:`~droidw_cli.synth.photometric`); the ground

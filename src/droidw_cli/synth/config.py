@@ -26,7 +26,11 @@ GENERATOR_VERSION = 1
 TUM_FOCAL_640 = 525.0  # the TUM RGB-D nominal focal length at 640×480
 #: camera path families that travel down a street (synth.forward); their scene is a street (synth.street)
 FORWARD_MOTIONS = ("forward", "ride", "drive")
-MOTIONS = ("handheld", "wobble", "rotate", "stopgo", "fixed") + FORWARD_MOTIONS  # camera path families, see synth.motions
+#: follow shots in a street (synth.follow): the camera keeps one mover, the subject, in the middle of the frame
+FOLLOW_MOTIONS = ("follow", "follow-pan")
+STREET_MOTIONS = FORWARD_MOTIONS + FOLLOW_MOTIONS  # the camera paths whose scene is a street
+#: camera path families, see synth.motions (new families go at the end: the room's draw from their index)
+MOTIONS = ("handheld", "wobble", "rotate", "stopgo", "fixed") + FORWARD_MOTIONS + FOLLOW_MOTIONS
 
 
 @dataclass(frozen=True)
@@ -53,7 +57,11 @@ class SynthConfig:
     ``motion`` picks the camera path family (:data:`MOTIONS`, see
     :mod:`droidw_cli.synth.motions`): ``handheld`` (the default, a room-scale
     walk), ``wobble`` (near-still hand), ``rotate`` (fast roll/pitch/yaw on
-    the spot), ``stopgo`` (the handheld path with full stops) or ``fixed``.
+    the spot), ``stopgo`` (the handheld path with full stops) or ``fixed``;
+    ``forward``, ``ride`` and ``drive`` travel down a street
+    (:mod:`droidw_cli.synth.forward`); ``follow`` and ``follow-pan`` are
+    follow shots there, the camera panning to keep mover 0 (the subject)
+    in the middle of the frame (:mod:`droidw_cli.synth.follow`).
 
     Photometric options (all off by default; they change the colour images
     only, never depth, mask or pose, which stay those of the frame's centre
@@ -163,7 +171,7 @@ class SynthConfig:
         fx / 4 in a street (at 4 m: its surfaces are farther, and longer)."""
         if self.texel_density is not None:
             return float(self.texel_density)
-        return float(self.intrinsics[0]) / (4.0 if self.motion in FORWARD_MOTIONS else 2.0)
+        return float(self.intrinsics[0]) / (4.0 if self.motion in STREET_MOTIONS else 2.0)
 
     def timestamp(self, k: int) -> float:
         """Timestamp of frame ``k`` in seconds, rounded to microseconds as written in the files."""
@@ -181,7 +189,10 @@ class SynthConfig:
         ``walk-static`` (the same room and path, no walkers), ``wobble``
         (near-still hand, a walker crossing close), ``rotate`` (fast rotation
         on the spot, 4 walkers), ``stopgo`` (handheld with full stops) and
-        ``fixed`` (a still camera, 3 walkers, 300 frames).
+        ``fixed`` (a still camera, 3 walkers, 300 frames).  Down a street:
+        ``forward``, ``ride``, ``drive`` and ``forward-small``; follow shots
+        ``follow`` (walking 2.5-4 m behind a walker, panning with it) and
+        ``follow-pan`` (walking slowly while panning side-on with a passer-by).
         """
         if name not in PRESETS:
             raise ValueError(f"unknown synth preset {name!r} (use one of {', '.join(sorted(PRESETS))})")
@@ -224,6 +235,13 @@ PRESETS.update({
     "drive": {**_STREET, **KITTI_CAMERA, "motion": "drive", "movers": 3, "fps": 10.0, "blur": 0.15, "noise_std": 2.0,
               "gain_drift": 0.05, "frames": 100, "texel_density": 90.0},
     "forward-small": {**_STREET, "motion": "forward", "movers": 2, **_SMALL},
+})
+# follow shots (synth.follow): mover 0 is the subject the camera keeps in the middle; blur, JPEG, noise as forward
+_FOLLOW = {**_STREET, "movers": 3, "blur": 0.4, "jpeg_quality": 75, "noise_std": 1.5, "gain_drift": 0.08,
+           "frames": 450}
+PRESETS.update({
+    "follow": {**_FOLLOW, "motion": "follow"},
+    "follow-pan": {**_FOLLOW, "motion": "follow-pan", "blur": 0.5},
 })
 
 

@@ -39,7 +39,8 @@ from droidw_cli.geometry.camera import scale_intrinsics
 from droidw_cli.synth import exposure, layout
 from droidw_cli.synth.crowd import extent, far_walk, keep_apart, shrink, slide
 from droidw_cli.synth.atlas import AtlasBuilder
-from droidw_cli.synth.config import FORWARD_MOTIONS, SynthConfig, SynthFrame
+from droidw_cli.synth.config import FOLLOW_MOTIONS, STREET_MOTIONS, SynthConfig, SynthFrame
+from droidw_cli.synth.follow import follow_world
 from droidw_cli.synth.motions import CameraMotion, camera_motion
 from droidw_cli.synth.paths import EllipseWalk, make_walk
 from droidw_cli.synth.photometric import Photometric, to_linear
@@ -162,9 +163,9 @@ class Scene:
         self.cfg = cfg
         seed = cfg.seed
         self.photometric = Photometric.of(cfg)
-        street = cfg.motion in FORWARD_MOTIONS
-        if street:  # a camera travelling down a street (synth.street_world)
-            world = street_world(cfg)
+        street = cfg.motion in STREET_MOTIONS
+        if street:  # a camera travelling down a street (synth.street_world) or following a mover there (synth.follow)
+            world = follow_world(cfg) if cfg.motion in FOLLOW_MOTIONS else street_world(cfg)
             self.room, self.street, self.camera = None, world.plan, world.camera
             statics, walker_parts, walks = world.statics, world.mover_parts, world.paths
         else:

@@ -58,8 +58,9 @@ class StreetPlan:
 
 
 def street_plan(motion: str, seed: int) -> StreetPlan:
-    """The street of a ``forward`` walk (on the right sidewalk), a ``ride`` (the right edge of the road) or a
-    ``drive`` (the right lane of a two-lane road with parking)."""
+    """The street of a ``forward`` walk (on the right sidewalk), a ``ride`` (the right edge of the road), a
+    ``drive`` (the right lane of a two-lane road with parking) or a follow shot (``follow``, ``follow-pan``:
+    :mod:`~droidw_cli.synth.follow`)."""
     rng = np.random.default_rng([seed, TAG_STREET])
     if motion == "forward":
         road, walk = rng.uniform(5.5, 7.0), rng.uniform(2.6, 3.4)
@@ -68,6 +69,13 @@ def street_plan(motion: str, seed: int) -> StreetPlan:
     if motion == "ride":
         road, walk = rng.uniform(7.0, 9.0), rng.uniform(2.5, 3.5)
         return StreetPlan(road, walk, 2, False, road / 2 - rng.uniform(1.9, 2.3), (7.0, 18.0), (8.0, 22.0), 60.0)
+    if motion == "follow":  # wide sidewalks, no parking: lane_x is the subject's line, mid-sidewalk
+        road, walk = rng.uniform(5.5, 7.0), rng.uniform(3.6, 4.4)
+        return StreetPlan(road, walk, 2, False, road / 2 + walk / 2, (6.0, 16.0), (6.0, 18.0), 35.0)
+    if motion == "follow-pan":  # the camera walks the outer part of the sidewalk, the subject passes on the road
+        road, walk = rng.uniform(6.0, 8.0), rng.uniform(2.6, 3.4)
+        return StreetPlan(road, walk, 2, False, road / 2 + walk * rng.uniform(0.6, 0.75), (6.0, 16.0), (6.0, 18.0),
+                          35.0)
     road, walk = 11.4, rng.uniform(3.0, 4.0)  # two 3.5 m lanes and two 2.2 m parking strips
     return StreetPlan(road, walk, 2, True, 1.75, (6.0, 20.0), (10.0, 25.0), 120.0)
 
@@ -140,6 +148,15 @@ def building_specs(plan: StreetPlan, seed: int, y0: float, y_end: float, y_last:
     out.append(_box((0.0, y_end + 5.0, height / 2), (width, 5.0, height / 2), mats, (seed, TAG_BUILDING, 0, 0),
                     _density(y_end, y_last)))
     return out
+
+
+def start_building(plan: StreetPlan, seed: int, y_start: float) -> BoxSpec:
+    """A building across the street behind its start (its front, at y_start, faces +y): the end of the street
+    that a camera looking back sees (the follow shots, :mod:`~droidw_cli.synth.follow`)."""
+    height = np.random.default_rng([seed, TAG_BUILDING, 1]).uniform(*plan.heights)
+    mats = [None, None, None, st.facade, None, None]
+    return _box((0.0, y_start - 5.0, height / 2), (plan.facade + 14.0, 5.0, height / 2), mats,
+                (seed, TAG_BUILDING, 3, 0))
 
 
 def _car_parts(rng: np.random.Generator, seed: tuple[int, ...]) -> list[BoxSpec]:

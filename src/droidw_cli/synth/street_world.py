@@ -61,7 +61,8 @@ class LineWalk:
 
 @dataclass(frozen=True, eq=False)
 class StreetWorld:
-    """The street's boxes (the outer box first), the camera, and each mover's parts and path."""
+    """The street's boxes (the outer box first), the camera (a ForwardPath, or a
+    :class:`~droidw_cli.synth.follow.FollowPath`), and each mover's parts and path."""
 
     plan: street.StreetPlan
     camera: ForwardPath
@@ -75,8 +76,8 @@ def _walker(rng: np.random.Generator, at: np.ndarray, velocity: np.ndarray, t_at
                     bob=0.015, step_omega=2 * np.pi * rng.uniform(1.6, 2.0))
 
 
-def _mover(role: str, rng: np.random.Generator, cfg: SynthConfig, plan: street.StreetPlan,
-           camera: ForwardPath) -> LineWalk:
+def mover_path(role: str, rng: np.random.Generator, cfg: SynthConfig, plan: street.StreetPlan,
+               camera: ForwardPath) -> LineWalk:
     """The path of one mover of ``role`` (module docstring), in walker time (camera and walker speeds apply)."""
     duration = cfg.frames / cfg.fps
 
@@ -89,7 +90,8 @@ def _mover(role: str, rng: np.random.Generator, cfg: SynthConfig, plan: street.S
         at, t = cam_at(rng.uniform(0.35, 0.65))
         return _walker(rng, at + [side * rng.uniform(0.8, 1.4), 0.0], np.array([0.0, -rng.uniform(1.1, 1.5)]), t)
     if role == "crossing":
-        ahead = {"forward": (3.0, 7.0), "ride": (8.0, 15.0), "drive": (20.0, 35.0)}[cfg.motion]
+        ahead = {"forward": (3.0, 7.0), "ride": (8.0, 15.0), "drive": (20.0, 35.0), "follow": (5.0, 9.0),
+                 "follow-pan": (3.0, 7.0)}[cfg.motion]
         at, t = cam_at(rng.uniform(0.2, 0.8))
         return _walker(rng, at + [0.0, rng.uniform(*ahead)], np.array([side * rng.uniform(1.0, 1.5), 0.0]), t)
     if role == "ahead":
@@ -112,6 +114,14 @@ def _mover(role: str, rng: np.random.Generator, cfg: SynthConfig, plan: street.S
     raise ValueError(f"unknown mover role {role!r}")
 
 
+def street_statics(plan: street.StreetPlan, seed: int, y0: float, y_end: float, y_last: float) -> list[BoxSpec]:
+    """The street's boxes from y0 to its end y_end (the outer box first); y_last is the camera's farthest y."""
+    return [street.outer_box(plan, seed, y0 - 2.0, y_end + 12.0),
+            *street.ground_specs(plan, seed, y0, y_end, y_last),
+            *street.building_specs(plan, seed, y0, y_end, y_last),
+            *street.furnishing_specs(plan, seed, y0, y_end, y_last)]
+
+
 def street_world(cfg: SynthConfig) -> StreetWorld:
     """Lay out the street of ``cfg`` (a forward motion), its camera path and movers."""
     seed = cfg.seed
@@ -121,15 +131,12 @@ def street_world(cfg: SynthConfig) -> StreetWorld:
     ys = camera.position(np.linspace(0.0, duration, 200))[:, 1]
     y0, y_last = float(ys.min()) - BEHIND, float(ys.max())
     y_end = y_last + plan.far
-    statics = [street.outer_box(plan, seed, y0 - 2.0, y_end + 12.0),
-               *street.ground_specs(plan, seed, y0, y_end, y_last),
-               *street.building_specs(plan, seed, y0, y_end, y_last),
-               *street.furnishing_specs(plan, seed, y0, y_end, y_last)]
+    statics = street_statics(plan, seed, y0, y_end, y_last)
     roles = ROLES[cfg.motion]
     parts, paths = [], []
     for i in range(cfg.n_movers):
         role = roles[i] if i < len(roles) else roles[i % len(roles)]
         rng = np.random.default_rng([seed, TAG_MOVER, i])
-        paths.append(_mover(role, rng, cfg, plan, camera))
+        paths.append(mover_path(role, rng, cfg, plan, camera))
         parts.append(street.car_parts(seed, i) if role.startswith("car") else layout.walker_specs(seed, i))
     return StreetWorld(plan, camera, statics, parts, paths)
