@@ -119,7 +119,8 @@ def test_uncertainty_step_same_for_either_feature_layout(problem):
 
 
 def test_evidence_maps_match_their_definition(problem):
-    """Mean wide-edge flow residual (log1p) and one minus the mean confidence, per frame and pixel."""
+    """Mean wide-edge relative flow residual ρ = r / (1 + predicted flow) (log1p) and one minus the mean
+    confidence, per frame and pixel."""
     state, edges = problem
     n, _, h, w = state.features.shape
     ev = evidence_maps(CpuBackend(), state, edges, 0.05)
@@ -132,7 +133,10 @@ def test_evidence_maps_match_their_definition(problem):
             continue
         wide = out[(edges.ii[out] - edges.jj[out]).abs() >= 2]
         v = valid[wide].double()
-        r = (edges.target[wide].double() - coords[wide]).norm(dim=-1) * v
+        grid = torch.stack(torch.meshgrid(torch.arange(w, dtype=torch.float64), torch.arange(h, dtype=torch.float64),
+                                          indexing="xy"), -1)
+        predicted = (coords[wide] - grid).norm(dim=-1)
+        r = (edges.target[wide].double() - coords[wide]).norm(dim=-1) / (1.0 + predicted) * v
         residual = torch.log1p(r.sum(0) / v.sum(0).clamp_min(1.0))
         doubt = 1.0 - edges.weight[out][..., 0].double().mean(0)
         assert torch.allclose(ev[f, 0].double(), residual, atol=1e-5)
