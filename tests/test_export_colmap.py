@@ -5,6 +5,8 @@ Runs: :mod:`trainer_runs` (a tracked 320×240 walker clip, working size 160×120
 
 from __future__ import annotations
 
+import json
+
 import cv2
 import numpy as np
 import pytest
@@ -163,3 +165,23 @@ def test_errors(mono, tmp_path, capsys):
     (tmp_path / "taken" / "x").write_text("")
     code, _, err = cli(["export", "colmap", str(run), "--out", str(tmp_path / "taken")], capsys)
     assert code == 2 and "not empty" in err
+
+
+def test_the_distortion_the_run_removed_comes_from_the_input_calibration(mono, tmp_path):
+    """A run's calib.txt holds the undistorted intrinsics; the distortion is the input calibration's."""
+    import shutil
+
+    from trainer_runs import with_input
+
+    seq, run = mono
+    assert json.loads((run / "run.json").read_text())["calibration"]["source"] == "input"
+    bent = tmp_path / "seq"
+    shutil.copytree(seq, bent)
+    dist = [-0.05, 0.01, 0.001, -0.002]
+    k = [float(v) for v in (seq / "calib.txt").read_text().split()]
+    (bent / "calib.txt").write_text(" ".join(repr(v) for v in [*k[:4], *dist]) + "\n")
+    camera = export(with_input(run, tmp_path / "run", str(bent)), tmp_path / "out")["cameras"][1]
+    assert camera[0] == "OPENCV" and camera[3][4:] == dist
+    (bent / "calib.txt").write_text(" ".join(repr(v) for v in [k[0] * 1.1, *k[1:4], *dist]) + "\n")
+    camera = export(with_input(run, tmp_path / "run2", str(bent)), tmp_path / "out2")["cameras"][1]
+    assert camera[0] == "PINHOLE"  # another camera than the run's: its distortion is not taken

@@ -6,7 +6,8 @@ Used by ``droidw export nerfstudio`` and ``droidw export colmap``.  What is read
   run's world frame), ``index`` (each keyframe's position in the run's frame selection), ``timestamps``,
   ``intrinsics`` / ``work_size`` (the working image the run tracked on) and the 1/8-grid masks;
 * ``calib.txt``: the camera of the *input* frames, OpenCV's pixel convention (a pixel's centre at integer
-  coordinates), with the radial-tangential distortion the run removed before tracking (if any);
+  coordinates); the radial-tangential distortion the run removed before tracking (if any) is taken from
+  calib.txt, else from the calibration the run used (:func:`_with_distortion`);
 * ``run.json``: ``input`` (re-read with :func:`~droidw_cli.io.input.open_source` with the run's frame
   selection, ``config.io``), ``metric``.
 
@@ -61,6 +62,7 @@ class TrainerRun:
     metric: bool
     io: dict
     npz: dict
+    calibration_source: str = ""
 
     @property
     def num_keyframes(self) -> int:
@@ -90,12 +92,12 @@ def _read_info(run_dir: Path) -> dict:
     return info
 
 
-def load_trainer_run(run_dir: Path, masks: str = "masked") -> TrainerRun:
+def load_trainer_run(run_dir: Path, masks: str = "dynamic") -> TrainerRun:
     """Read a run folder (clear :class:`InputError` for a missing folder, file, keyframes or calibration).
 
-    ``masks``: ``masked`` (the output masks joined with every pixel BA zeroed in the loop, the set the
-    static point cloud leaves out; the default) or ``dynamic`` (the output masks only); a run without
-    ``masked`` falls back to ``dynamic``.
+    ``masks``: ``dynamic`` (the run's output masks; the default) or ``masked`` (those joined with every
+    pixel BA zeroed in the loop, the set the static point cloud leaves out); a run without ``masked``
+    falls back to ``dynamic``.
     """
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
@@ -116,7 +118,32 @@ def load_trainer_run(run_dir: Path, masks: str = "masked") -> TrainerRun:
         timestamps=np.asarray(npz["timestamps"], np.float64), poses_c2w=poses,
         masks=None if kind is None else np.asarray(npz[kind], dtype=bool), mask_kind=kind,
         metric=bool(info.get("metric", False)), io=dict((info.get("config") or {}).get("io") or {}), npz=npz,
+        calibration_source=str((info.get("calibration") or {}).get("source", "")),
     )
+
+
+def _with_distortion(run: TrainerRun, source) -> Calibration:
+    """calib.txt's camera with the distortion the run removed from the frames.
+
+    A run's calib.txt holds the intrinsics without the distortion (the tracker undistorted the frames
+    and records the result), so the distortion comes from where the calibration came from (``run.json``
+    ``calibration.source``): the calibration found with the input, or the ``--calib`` file, if it still
+    reads and its fx fy cx cy are calib.txt's.
+    """
+    calib = run.calibration
+    if calib.has_distortion or run.calibration_source in ("", "estimated", "guessed", "auto"):
+        return calib
+    origin = source.intrinsics_hint
+    if run.calibration_source != "input":
+        try:
+            origin = load_calibration(run.calibration_source, source.size, camera=source.calibration_camera)
+        except UserError:
+            origin = None
+    if origin is None or not origin.has_distortion:
+        return calib
+    if np.abs(origin.as_array() - calib.as_array()).max() > INTRINSICS_TOLERANCE * calib.fx:
+        return calib  # not the camera the run used
+    return Calibration(calib.fx, calib.fy, calib.cx, calib.cy, tuple(origin.distortion))
 
 
 def open_frames(run: TrainerRun, input_path: str | Path | None = None, depth_scale: float | None = None):
@@ -155,7 +182,7 @@ def open_frames(run: TrainerRun, input_path: str | Path | None = None, depth_sca
         if depth_scale is not None:
             source.depth_scale = float(depth_scale)
             source.lazy_depth = True  # only the keyframes' depth images are decoded
-    return replace(run, size=(int(h), int(w))), source
+    return replace(run, size=(int(h), int(w)), calibration=_with_distortion(run, source)), source
 
 
 def keyframe_frames(run: TrainerRun, source, progress: bool = False) -> Iterator[tuple[int, np.ndarray, np.ndarray | None]]:
