@@ -195,10 +195,10 @@ def test_errors_are_one_line_and_write_nothing(mono, tmp_path, capsys):
     assert code == 2 and "--input" in err and "Traceback" not in err and not out.exists()
     moved = tmp_path / "moved"
     shutil.copytree(seq, moved)
-    last = listing(moved, "rgb")[int(run_arrays(run)["index"][-1])]
-    last.unlink()  # the last keyframe's frame is gone: found only after the others were written
+    last = int(run_arrays(run)["index"][-1])
+    listing(moved, "rgb")[last].unlink()  # the last keyframe's frame is gone: found only after the others were written
     code, _, err = cli(["export", "nerfstudio", str(gone), "--out", str(out), "--input", str(moved)], capsys)
-    assert code == 2 and "missing" in err and "Traceback" not in err, err
+    assert code == 2 and f"frame {last} " in err and "missing" in err and "Traceback" not in err, err
     assert not out.exists() and not list(tmp_path.glob(".*"))  # nothing partial
     empty = tmp_path / "empty-run"
     empty.mkdir()

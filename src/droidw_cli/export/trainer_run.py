@@ -195,7 +195,7 @@ def keyframe_frames(run: TrainerRun, source, progress: bool = False) -> Iterator
     from tqdm import tqdm
 
     wanted = {int(i): k for k, i in enumerate(run.index)}
-    found = 0
+    seen: set[int] = set()
     with tqdm(total=len(wanted), desc="frames", unit="kf", disable=not progress, leave=False) as bar:
         for frame in source:
             k = wanted.get(int(frame.index))
@@ -206,13 +206,13 @@ def keyframe_frames(run: TrainerRun, source, progress: bool = False) -> Iterator
                                  f"keyframe {k} has {run.timestamps[k]:.6f}: not the input the run was tracked on")
             depth = frame.depth() if callable(frame.depth) else frame.depth
             yield k, frame.image, depth
-            found += 1
+            seen.add(k)
             bar.update()
-            if found == len(wanted):
+            if len(seen) == len(wanted):
                 return
-    missing = sorted(i for i, k in wanted.items())[found:found + 1]
-    raise InputError(f"{source.path}: frame {missing[0] if missing else '?'} (a keyframe of {run.run_dir}) is missing "
-                     f"or cannot be decoded; {found} of {len(wanted)} keyframes were found")
+    missing = min(i for i, k in wanted.items() if k not in seen)
+    raise InputError(f"{source.path}: frame {missing} (a keyframe of {run.run_dir}) is missing or cannot be "
+                     f"decoded; {len(seen)} of {len(wanted)} keyframes were found")
 
 
 def check_depth_scale(run: TrainerRun, k: int, depth: np.ndarray) -> float:
