@@ -1,4 +1,4 @@
-"""``droidw export``: point clouds and uncertainty overlays from a run folder."""
+"""``droidw export``: point clouds, uncertainty overlays and datasets for 3DGS trainers from a run folder."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ from droidw_cli.io.outputs import check_output_file, check_output_folder
 
 @click.group("export")
 def export() -> None:
-    """Export a run: PLY point clouds, dynamic objects, uncertainty overlays, a rendered view of the cloud.
+    """Export a run: PLY point clouds, dynamic objects, uncertainty overlays, a rendered view of the cloud,
+    datasets for 3DGS trainers (nerfstudio, COLMAP) with the movers masked out.
 
     \b
     Examples:
@@ -21,6 +22,8 @@ def export() -> None:
       droidw export objects run/ --out objects.json
       droidw export uncertainty run/ --out overlays/ --video
       droidw export render run/ --out cloud.png --what all
+      droidw export nerfstudio run/ --out ns/        # then: ns-train splatfacto --data ns/
+      droidw export colmap run/ --out colmap/
     """
 
 
@@ -148,3 +151,80 @@ def render(run_dir, out, what, size, azimuth, elevation, zoom, point_size, no_tr
                          dynamic=None if what == "static" else part.dynamic, trajectory=not no_trajectory)
     write_png(out, image)
     click.echo(f"rendered {len(part.xyz)} points to {out} ({size[0]}x{size[1]})")
+
+
+def _trainer_options(func):
+    """The options `export nerfstudio` and `export colmap` share."""
+    options = [
+        click.option("--input", "input_path", type=click.Path(path_type=Path), default=None,
+                     help="Where the run's frames are now (default: run.json's input)."),
+        click.option("--masks", type=click.Choice(["dynamic", "masked"]), default="dynamic", show_default=True,
+                     help="dynamic: the run's output mover masks; masked: those and every pixel BA zeroed in the "
+                          "loop (what the static cloud leaves out: far more of the frame)."),
+        click.option("--mask-dilate", type=click.IntRange(min=0), default=None, metavar="PX",
+                     help="Grow the movers by this many input pixels (the 1/8-grid masks cut through outlines) "
+                          "[default: half a grid cell, 4 working pixels]."),
+        click.option("--max-uncertainty", type=float, default=0.8, show_default=True,
+                     help="As for `export ply` (the static points)."),
+        click.option("--min-views", type=click.IntRange(min=0), default=2, show_default=True,
+                     help="As for `export ply`."),
+        click.option("--quiet", is_flag=True, help="No progress bar."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+@export.command("nerfstudio")
+@click.argument("run_dir", type=click.Path(path_type=Path), default=Path("."), required=False)
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("nerfstudio"), show_default=True,
+              help="A new (or empty) folder.")
+@click.option("--depth-scale", type=float, default=5000.0, show_default=True,
+              help="RGB-D runs: the depth images' units per metre, as given to `droidw track --depth-scale`.")
+@_trainer_options
+def nerfstudio(run_dir, out, depth_scale, input_path, masks, mask_dilate, max_uncertainty, min_views, quiet):
+    """Write the run's keyframes as a nerfstudio dataset: transforms.json, images/, masks/ (black = the
+    movers, for the trainer to ignore), depths/ (RGB-D runs) and points.ply (the static cloud).
+
+    Every keyframe becomes a frame, at the input resolution; the poses are camera-to-world in nerfstudio's
+    OpenGL camera axes.  Train with e.g. `ns-train splatfacto --data OUT`.
+    """
+    import sys
+
+    from droidw_cli.export.nerfstudio import export_nerfstudio
+    from droidw_cli.export.pointcloud import CloudParams
+
+    if not depth_scale > 0:
+        raise InputError(f"--depth-scale must be positive, got {depth_scale:g}")
+    doc = export_nerfstudio(run_dir, out, input_path=input_path, masks=masks, dilate=mask_dilate,
+                            depth_scale=depth_scale,
+                            cloud=CloudParams(max_uncertainty=max_uncertainty, min_views=min_views),
+                            progress=not quiet and sys.stderr.isatty())
+    frames = doc["frames"]
+    extras = [f"{sum('mask_path' in f for f in frames)} masks", f"{sum('depth_file_path' in f for f in frames)} depth"]
+    if "ply_file_path" not in doc:
+        extras.append("no static points")
+    click.echo(f"wrote {len(frames)} frames ({', '.join(extras)}) to {out / 'transforms.json'}")
+
+
+@export.command("colmap")
+@click.argument("run_dir", type=click.Path(path_type=Path), default=Path("."), required=False)
+@click.option("--out", "out", type=click.Path(path_type=Path), default=Path("colmap"), show_default=True,
+              help="A new (or empty) folder.")
+@_trainer_options
+def colmap(run_dir, out, input_path, masks, mask_dilate, max_uncertainty, min_views, quiet):
+    """Write the run's keyframes as a COLMAP text model: sparse/0/{cameras,images,points3D}.txt (the static
+    points), images/ and masks/ (COLMAP's masks/NAME.png, black = the movers).
+
+    Every keyframe becomes an image, at the input resolution; for gsplat's or the original 3DGS trainer.
+    """
+    import sys
+
+    from droidw_cli.export.colmap import export_colmap
+    from droidw_cli.export.pointcloud import CloudParams
+
+    summary = export_colmap(run_dir, out, input_path=input_path, masks=masks, dilate=mask_dilate,
+                            cloud=CloudParams(max_uncertainty=max_uncertainty, min_views=min_views),
+                            progress=not quiet and sys.stderr.isatty())
+    click.echo(f"wrote {summary['images']} images ({summary['masks']} masks), {summary['points']} static points "
+               f"({summary['camera']} camera) to {out / 'sparse' / '0'}")
