@@ -1,7 +1,7 @@
 // The per-pixel maths of droidw's uncertainty-aware BA (DROID-W Eq. 1-9), shared by the compiled backends:
 // the native CPU backend (backends/native, g++) and the CUDA kernels (backends/cuda, nvcc) include this
 // header, so a CPU-only test run exercises the very functions the CUDA kernels call.  Plain C++ with
-// DROIDW_HD = `__host__ __device__ __forceinline__` under nvcc and `inline` elsewhere; no torch here.
+// DROIDW_HD = `__host__ __device__ __forceinline__` under nvcc and `inline` elsewhere; no torch here (C++17).
 //
 // Conventions (droidw_cli.ba.types, droidw_cli.geometry.projection):
 //   g      12 floats of G_ij = G_j G_i^-1: R row-major (9), then t (3)
@@ -123,7 +123,7 @@ DROIDW_HD void jacobian_rows(const Projected& o, const float* g, const Pinhole& 
   ju[3] = -k.fx * xy;                   jv[3] = -k.fy * (1.0f + o.y * o.y);
   ju[4] = k.fx * (1.0f + o.x * o.x);    jv[4] = k.fy * xy;
   ju[5] = -k.fx * o.y;                  jv[5] = k.fy * o.x;
-  if (KJ > kPoseDof) {
+  if constexpr (KJ > kPoseDof) {
     const float dfx_u = o.x - o.xbar * o.z * (g[0] - o.x * g[6]);
     const float dfx_v = -(k.fy / k.fx) * o.xbar * o.z * (g[3] - o.y * g[6]);
     const float dfy_u = -(k.fx / k.fy) * o.ybar * o.z * (g[1] - o.x * g[7]);
@@ -134,7 +134,7 @@ DROIDW_HD void jacobian_rows(const Projected& o, const float* g, const Pinhole& 
     } else {
       ju[kPoseDof] = k.fx * dfx_u;
       jv[kPoseDof] = k.fx * dfx_v;
-      if (KJ > kPoseDof + 1) {
+      if constexpr (KJ > kPoseDof + 1) {
         ju[KJ - 1] = k.fy * dfy_u;
         jv[KJ - 1] = k.fy * dfy_v;
       }
