@@ -24,14 +24,16 @@ threads (torch's, ``torch.set_num_threads``).
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import torch
 from torch import Tensor
 
 from droidw_cli.ba.params import BAParams
-from droidw_cli.ba.schur import apply_focal_update, build_layout, active_nodes
+from droidw_cli.ba.schur import active_nodes, apply_focal_update
 from droidw_cli.ba.types import BAState, BAStepResult, EdgeSet
 from droidw_cli.geometry.lie import normalize_pose, pose_compose, se3_exp
-from droidw_cli.geometry.projection import POSE_DOF, relative_poses
+from droidw_cli.geometry.projection import FOCAL_DOF, relative_poses
 from droidw_backend_cpu.backend import CpuBackend
 from droidw_backend_native import build
 
@@ -95,7 +97,9 @@ class NativeBackend(CpuBackend):
         self._validate(state, edges)
         st, ed = self._prepare(state, edges)
         k = build.load_kernels()
-        layout = build_layout(ed.ii, ed.jj, st.num_frames, params.optimize_focal)
+        nf = FOCAL_DOF[params.optimize_focal]
+        # the kernel groups edges by frame itself; of the block layout only the node counts are needed here
+        layout = SimpleNamespace(num_frames=st.num_frames, num_nodes=st.num_frames + (1 if nf else 0), nf=nf)
         slot, ids = active_nodes(layout, ed.ii, ed.jj, params.t0)
         n, h, w = st.disps.shape
         u_map = self.uncertainty_weights(st, params)
