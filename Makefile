@@ -16,7 +16,7 @@ install: $(PY)
 	$(PIP) install -q torch==2.13.0
 	# the optional extras too (Ray for `droidw batch`, rerun for `droidw view`), so that `make test` covers them
 	# constraints.txt pins the builds the README's figures were measured with (OpenCV moves them)
-	$(PIP) install -q -c constraints.txt -e ".[test,ray,view]" -e backends/cpu -e backends/cuda
+	$(PIP) install -q -c constraints.txt -e ".[test,ray,view]" -e backends/cpu -e backends/cuda -e backends/native
 
 test: install
 	$(PY) -m pytest -q $(PYTEST_ARGS)

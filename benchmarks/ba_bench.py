@@ -4,6 +4,7 @@
     python benchmarks/ba_bench.py                         # table: K = 8 … 256 and the 25-kf/75-edge window
     python benchmarks/ba_bench.py --keyframes 25 --edges 75 --json
     python benchmarks/ba_bench.py --backend cuda --keyframes 256
+    python benchmarks/ba_bench.py --backend native --keyframes 25 --edges 75 --window   # the C++ backend
     python benchmarks/ba_bench.py --against /path/to/other/checkout --rounds 5   # old vs new, interleaved
 
 Per configuration it reports the median wall time of ``ba_step`` and of
@@ -215,7 +216,7 @@ def _compare(args, configs, header: str) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--backend", default="cpu", help="cpu | cuda | auto (default cpu)")
+    ap.add_argument("--backend", default="cpu", help="cpu | native | cuda | auto (default cpu)")
     ap.add_argument("--keyframes", type=int, help="keyframes in the window (omit for the whole table)")
     ap.add_argument("--edges", type=int, help="cap on the number of edges (default: all pairs up to 2 apart)")
     ap.add_argument("--grid", default="48x64", help="BA grid HxW (default 48x64)")

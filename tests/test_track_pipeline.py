@@ -11,8 +11,8 @@ import json
 
 import numpy as np
 import pytest
-import torch
 
+from droidw_cli.ba.registry import resolve_backend
 from droidw_cli.cli import main
 from droidw_cli.eval import evaluate_ate
 from droidw_cli.io.trajectory import read_trajectory
@@ -65,8 +65,10 @@ def test_static_known_calibration_ate_bounded(static_seq, static_run):
 def test_run_folder_contents(static_run):
     info = json.loads((static_run / "run.json").read_text())
     assert info["frames"] == 70 and 3 <= info["keyframes"] < 35 and info["initialised"] is True
-    # --backend auto (the default): cpu here, cuda on a machine with a GPU (its stderr line and run.json say which)
-    assert info["backend"] == ("cuda" if torch.cuda.is_available() else "cpu")
+    # --backend auto (the default): cuda on a machine with a GPU, else native where it builds, else cpu (its
+    # stderr line and run.json say which)
+    assert info["backend"] == resolve_backend("auto").name
+    assert info["backend_choice"]["requested"] == "auto"
     assert info["fps"] > 0 and info["peak_memory_mb"] > 0
     assert {"decode", "flow", "ba", "filler"} <= set(info["seconds_per_stage"])
     with np.load(static_run / "keyframes.npz") as z:

@@ -78,7 +78,7 @@ def run_track(input_path, out_dir, calib=None, backend="auto", config_name="defa
 
         echo = click.echo
     ba_backend = choice.backend
-    if choice.requested == "auto":  # say which one auto picked, and why not the others
+    if choice.requested == "auto" or choice.passed_over:  # say which one auto picked (or fell back to), and why
         echo(f"droidw: {choice.describe()}", err=True)
     corr = get_correspondence_source(cfg.correspondence)
     features = get_feature_extractor(cfg.features.name) if cfg.uncertainty.enable else None

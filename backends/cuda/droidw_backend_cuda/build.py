@@ -12,6 +12,8 @@ import os
 from pathlib import Path
 from types import ModuleType
 
+from droidw_cli.ba.csrc import INCLUDE_DIR
+
 CSRC = Path(__file__).resolve().parent / "csrc"
 SOURCES = ("droidw_ba.cpp", "linearize.cu", "similarity.cu")
 EXTENSION_NAME = "droidw_ba_cuda"
@@ -64,7 +66,7 @@ def load_kernels(verbose: bool = False) -> ModuleType:
         _kernels = cpp_extension.load(
             name=EXTENSION_NAME,
             sources=[str(CSRC / s) for s in SOURCES],
-            extra_include_paths=[str(CSRC)],
+            extra_include_paths=[str(CSRC), str(INCLUDE_DIR)],  # + the per-pixel maths shared with native
             extra_cflags=list(CXX_FLAGS),
             extra_cuda_cflags=list(CUDA_FLAGS),
             build_directory=str(out),

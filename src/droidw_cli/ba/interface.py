@@ -26,6 +26,9 @@ class BABackend(ABC):
     #: buffer's dtype, channels-first) or ``"float32_channels_last"`` (what the CPU backend computes
     #: on; converted from the buffer directly, the window needs no stacked float16 copy beside it)
     feature_layout: str = "stored"
+    #: the backend that runs instead where this one cannot (e.g. no compiler for its kernels), or None: asking
+    #: for it by name then fails with a clear error (see :func:`droidw_cli.ba.registry.resolve_backend`)
+    fallback: str | None = None
 
     @classmethod
     @abstractmethod

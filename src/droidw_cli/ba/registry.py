@@ -4,8 +4,10 @@ Backends register under the entry-point group ``droidw.backends`` (name →
 ``module:Class``, a :class:`~droidw_cli.ba.interface.BABackend` subclass).  The
 CPU reference backend is always known, even when its entry point is missing
 (``droidw_backend_cpu`` is imported directly).  Loading a backend class never
-builds anything; :func:`get_backend` builds a CUDA backend's kernels only when
-that backend is chosen.
+builds anything; :func:`get_backend` builds a compiled backend's kernels (CUDA,
+native) only when that backend is chosen.  A backend class may name a
+``fallback`` (the native one names ``cpu``): asked for by name where it cannot
+run, the fallback runs instead and the choice records why.
 """
 
 from __future__ import annotations
@@ -20,8 +22,9 @@ from droidw_cli.errors import UserError
 ENTRY_POINT_GROUP = "droidw.backends"
 #: always-available backends, used when their entry point is not installed
 BUILTIN = {"cpu": "droidw_backend_cpu:CpuBackend"}
-#: preference order of ``auto``
-AUTO_ORDER = ("cuda", "cpu")
+#: preference order of ``auto``: the GPU, then the fused C++ kernels (same results as ``cpu`` to float32
+#: round-off, several times faster), then the vectorised torch reference
+AUTO_ORDER = ("cuda", "native", "cpu")
 
 
 @dataclass(frozen=True)
@@ -99,8 +102,11 @@ class BackendChoice:
         return self.backend.name
 
     def describe(self) -> str:
-        """One line, e.g. ``BA backend: cpu (auto; cuda: no CUDA device)``."""
+        """One line, e.g. ``BA backend: cpu (auto; cuda: no CUDA device)`` or
+        ``BA backend: cpu (instead of native: no C++ compiler …)``."""
         if self.requested != "auto":
+            if self.passed_over:
+                return f"BA backend: {self.name} (instead of {'; '.join(self.passed_over)})"
             return f"BA backend: {self.name}"
         return f"BA backend: {self.name} ({'; '.join(('auto',) + self.passed_over)})"
 
@@ -111,8 +117,9 @@ def resolve_backend(name: str = "auto") -> BackendChoice:
     ``auto`` tries :data:`AUTO_ORDER` (CUDA first): the first backend that is
     available here *and* starts (a CUDA backend builds or loads its kernels now)
     wins; each one passed over is listed with its reason.  Any other name must
-    be available and start, else :class:`UserError` names the CPU backend as
-    the alternative.
+    be available and start, else its class's ``fallback`` runs instead (the
+    reason recorded in ``passed_over``), or without one :class:`UserError` names
+    the CPU backend as the alternative.
     """
     if name == "auto":
         passed: list[str] = []
@@ -132,17 +139,29 @@ def resolve_backend(name: str = "auto") -> BackendChoice:
                         + "; ".join(passed))
     info = backend_info(name)
     if not info.available:
-        raise UserError(f"the '{name}' BA backend cannot run here ({info.reason}); "
-                        f"use --backend cpu (the CPU backend runs everywhere)")
+        return _fall_back(name, info.reason, UserError(f"the '{name}' BA backend cannot run here ({info.reason}); "
+                                                       f"use --backend cpu (the CPU backend runs everywhere)"))
     try:
         return BackendChoice(_instantiate(name), name)
     except Exception as exc:
-        raise UserError(f"the '{name}' BA backend failed to start ({exc}); "
-                        f"use --backend cpu (the CPU backend runs everywhere)") from exc
+        err = UserError(f"the '{name}' BA backend failed to start ({exc}); "
+                        f"use --backend cpu (the CPU backend runs everywhere)")
+        return _fall_back(name, f"failed to start ({type(exc).__name__}: {exc})", err, exc)
+
+
+def _fall_back(name: str, reason: str, error: UserError, cause: Exception | None = None) -> BackendChoice:
+    """The choice of ``name``'s declared fallback backend, or ``error`` raised when it declares none."""
+    try:
+        fallback = getattr(load_backend_class(name), "fallback", None)
+    except Exception:
+        fallback = None
+    if not fallback or fallback == name:
+        raise error from cause
+    return BackendChoice(_instantiate(fallback), name, (f"{name}: {reason}",))
 
 
 def get_backend(name: str = "auto") -> BABackend:
-    """A ready backend: ``auto`` (CUDA when it works, else CPU), ``cpu``, ``cuda`` or a plugin name.
+    """A ready backend: ``auto`` (CUDA, else native, else CPU), ``cpu``, ``native``, ``cuda`` or a plugin name.
 
     Choosing a backend that cannot run here raises :class:`UserError` naming the
     CPU backend as the alternative (see :func:`resolve_backend`).

@@ -8,7 +8,7 @@ import click
 
 
 @click.command("backends")
-@click.option("--build", is_flag=True, help="Also try to build/load compiled backends now (e.g. the CUDA kernels).")
+@click.option("--build", is_flag=True, help="Also try to build/load compiled backends now (the CUDA and native kernels).")
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object per backend.")
 def backends(build: bool, as_json: bool) -> None:
     """List the uncertainty-BA backends, whether each can run here, and why not.
@@ -17,6 +17,7 @@ def backends(build: bool, as_json: bool) -> None:
     Example output:
       cpu: available (torch 2.13.0+cpu, 2 CPU threads)
       cuda: unavailable (no CUDA device)
+      native: available (C++ kernels built at first use into ~/.cache/droidw/…, 2 CPU threads)
     """
     from droidw_cli.ba.registry import backend_info, backend_names, load_backend_class
 

@@ -21,8 +21,9 @@ from droidw_cli.io.sources import TUM_DEPTH_SCALE
                    "with the input.  Default: the calibration found with the input (calib.txt, EuRoC sensor.yaml, "
                    "KITTI calib.txt), else auto.")
 @click.option("--backend", default="auto", show_default=True,
-              help="BA backend: auto (cuda when it is available and builds, else cpu; stderr and run.json "
-                   "say which), cpu, cuda (see `droidw backends`).")
+              help="BA backend: auto (cuda when it is available and builds, else native C++ kernels where a "
+                   "compiler builds them, else cpu; stderr and run.json say which), native (falls back to cpu "
+                   "without a compiler, and says so), cpu, cuda (see `droidw backends`).")
 @config_option
 @set_option
 @click.option("--depth", is_flag=True,

@@ -10,19 +10,12 @@
 
 #include <torch/extension.h>
 
+// The constants, enums and per-pixel maths shared with the native CPU backend (droidw_cli/ba/csrc): the clamp
+// weighting's constants, kCosEps, kPoseDof, kMaxFocalDof, kRelStride, UncertaintyMode, FocalMode and the
+// DROIDW_HD (__host__ __device__) functions the kernels call.
+#include "droidw_pixel.h"
+
 namespace droidw {
-
-// Constants of the DROID-W clamp weighting: clamp(1 / max(SLOPE u - OFFSET, FLOOR), 0, 1).
-constexpr float kClampSlope = 45.0f;
-constexpr float kClampOffset = 35.0f;
-constexpr float kClampFloor = 0.1f;
-// Guards the cosine similarity against zero-norm features (droidw_cli.ba.uncertainty.COS_EPS).
-constexpr float kCosEps = 1e-8f;
-constexpr int kPoseDof = 6;
-constexpr int kMaxFocalDof = 2;
-
-enum UncertaintyMode : int { kUncertaintyOff = 0, kUncertaintyClamp = 1, kUncertaintyInverse = 2 };
-enum FocalMode : int { kFocalNone = 0, kFocalShared = 1, kFocalXY = 2 };
 
 // Scalar settings of one linearisation (see droidw_cli.ba.params.BAParams).
 struct LinearizeConfig {

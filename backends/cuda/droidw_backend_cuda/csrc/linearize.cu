@@ -71,42 +71,16 @@ __global__ void __launch_bounds__(kThreads)
     float scale = o.valid ? cfg.flow_weight_scale : 0.0f;
     if (umap != nullptr) {
       scale *= weight_factor(umap[fi * hw + p], cfg.uncertainty_mode);
-      if (cfg.bidirectional) {
-        const Bilinear b = bilinear_corners(o.px, o.py, height, width);
-        const float* uj = umap + fj * hw;
-        const float s = b.w[0] * uj[b.idx[0]] + b.w[1] * uj[b.idx[1]] + b.w[2] * uj[b.idx[2]] + b.w[3] * uj[b.idx[3]];
-        scale *= weight_factor(s, cfg.uncertainty_mode);
-      }
+      if (cfg.bidirectional)
+        scale *= weight_factor(bilinear_sample(umap + fj * hw, bilinear_corners(o.px, o.py, height, width)),
+                               cfg.uncertainty_mode);
     }
     const float wu = weight[2 * ep] * scale, wv = weight[2 * ep + 1] * scale;
     const float ru = target[2 * ep] - o.px, rv = target[2 * ep + 1] - o.py;
 
-    // pose-j rows (twist [v, w]) then log-focal rows
-    const float dz = d * o.z, xy = o.x * o.y;
+    // pose-j rows (twist [v, w]) then log-focal rows (droidw_pixel.h)
     float ju[KJ], jv[KJ];
-    ju[0] = cfg.fx * dz;          jv[0] = 0.0f;
-    ju[1] = 0.0f;                 jv[1] = cfg.fy * dz;
-    ju[2] = -cfg.fx * o.x * dz;   jv[2] = -cfg.fy * o.y * dz;
-    ju[3] = -cfg.fx * xy;         jv[3] = -cfg.fy * (1.0f + o.y * o.y);
-    ju[4] = cfg.fx * (1.0f + o.x * o.x); jv[4] = cfg.fy * xy;
-    ju[5] = -cfg.fx * o.y;        jv[5] = cfg.fy * o.x;
-    if (KJ > kPoseDof) {
-      const float dfx_u = o.x - o.xbar * o.z * (g[0] - o.x * g[6]);
-      const float dfx_v = -(cfg.fy / cfg.fx) * o.xbar * o.z * (g[3] - o.y * g[6]);
-      const float dfy_u = -(cfg.fx / cfg.fy) * o.ybar * o.z * (g[1] - o.x * g[7]);
-      const float dfy_v = o.y - o.ybar * o.z * (g[4] - o.y * g[7]);
-      if (cfg.focal_mode == kFocalShared) {
-        ju[kPoseDof] = cfg.fx * dfx_u + cfg.fy * dfy_u;
-        jv[kPoseDof] = cfg.fx * dfx_v + cfg.fy * dfy_v;
-      } else {
-        ju[kPoseDof] = cfg.fx * dfx_u;
-        jv[kPoseDof] = cfg.fx * dfx_v;
-        if (KJ > kPoseDof + 1) {
-          ju[KJ - 1] = cfg.fy * dfy_u;
-          jv[KJ - 1] = cfg.fy * dfy_v;
-        }
-      }
-    }
+    jacobian_rows<KJ>(o, g, k, cfg.focal_mode, d, ju, jv);
 
     // float64 sums of the float32 per-pixel terms
     const double dwu = wu, dwv = wv;
@@ -121,9 +95,8 @@ __global__ void __launch_bounds__(kThreads)
     acc[kSize - 1] += dwu * ru * ru + dwv * rv * rv;
 
     if (cfg.with_depth) {
-      const float t0 = g[9], t1 = g[10], t2 = g[11];
-      const float jdu = cfg.fx * o.z * (t0 - o.x * t2);
-      const float jdv = cfg.fy * o.z * (t1 - o.y * t2);
+      float jdu, jdv;
+      depth_derivative(o, g, k, jdu, jdv);
 #pragma unroll
       for (int a = 0; a < KJ; ++a) erows[(static_cast<int64_t>(e) * KJ + a) * hw + p] = wu * ju[a] * jdu + wv * jv[a] * jdv;
       atomicAdd(cdiag + fi * hw + p, dwu * jdu * jdu + dwv * jdv * jdv);

@@ -38,17 +38,15 @@ __global__ void similarity_kernel(SimilarityConfig cfg, int hw, int height, int 
       nij += s * s;
     }
     const float cosv = dot / fmaxf(sqrtf(nij) * sqrtf(ni), kCosEps);
-    float sim = fminf(fmaxf(cosv, 0.0f), 1.0f);
+    float residual = -1.0f;  // |target - p_ij|, only for the geometric factor
     if (target != nullptr && cfg.geo_sigma > 0.0f) {
       const float* tp = target + (static_cast<int64_t>(e) * hw + p) * 2;
-      const float r = hypotf(tp[0] - o.px, tp[1] - o.py) / cfg.geo_sigma;
-      sim *= expf(-r * r);
+      residual = hypotf(tp[0] - o.px, tp[1] - o.py);
     }
-    if (sim < cfg.sim_threshold) sim = 0.0f;
-    const float* uj = u + fj * hw;
+    const float sim = similarity_score(cosv, cfg.sim_threshold, residual, cfg.geo_sigma);
     const float ui = u[fi * hw + p];
-    const float uij = b.w[0] * uj[b.idx[0]] + b.w[1] * uj[b.idx[1]] + b.w[2] * uj[b.idx[2]] + b.w[3] * uj[b.idx[3]];
-    t = valid ? cfg.gamma_data * omega[e] * (1.0f - sim) / (ui * uij) : 0.0f;
+    const float uij = bilinear_sample(u + fj * hw, b);
+    t = similarity_term(sim, valid, cfg.gamma_data * omega[e], ui, uij);
     if (t != 0.0f) {
       atomicAdd(grad + fi * hw + p, static_cast<double>(-t / ui));
       const float gij = -t / uij;
