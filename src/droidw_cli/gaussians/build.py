@@ -48,9 +48,9 @@ def run_map(run_dir: Path, out_dir: Path, params: MapParams, input_path: Path | 
     out = check_output_folder(out_dir)
     torch.manual_seed(params.seed)
     rasteriser, how = resolve_rasteriser(params.rasteriser)
-    if echo is not None:
-        echo(f"droidw: rasteriser: {how}")
     inputs = load_inputs(Path(run_dir), params, input_path)
+    if echo is not None:  # after the checks of the run, so that an error stays one line
+        echo(f"droidw: rasteriser: {how}")
     t_load = time.perf_counter() - t0
     mapper = StaticMapper(inputs, params, rasteriser, Deadline(t0, STATIC_SHARE * budget), progress)
     static, static_info = mapper.run()
