@@ -118,3 +118,19 @@ def test_bad_size_is_one_line(run_dir, tmp_path, capsys):
     code, _, err = run(["map", str(run_dir), "--out", str(tmp_path / "m"), "--size", "100x20"], capsys)
     assert code == 2 and "aspect ratio" in err
     assert _nothing_written(tmp_path, "m")
+
+
+def test_view_shows_the_map_as_ellipsoids(run_dir, mapped, tmp_path, capsys):
+    pytest.importorskip("rerun")
+    from test_view import entity_rows
+
+    code, out, err = run(["view", str(run_dir), "--map", str(mapped), "--save", str(tmp_path / "m.rrd"), "--quiet"],
+                         capsys)
+    assert code == 0, err
+    doc = json.loads((mapped / "map.json").read_text())
+    assert f"{doc['gaussians']['static'] + doc['gaussians']['dynamic']} Gaussians" in out
+    rows = entity_rows(tmp_path / "m.rrd")
+    if rows is not None:
+        assert "/world/gaussians/static" in rows or "world/gaussians/static" in rows
+    code, _, err = run(["view", str(run_dir), "--map", str(tmp_path), "--save", str(tmp_path / "n.rrd")], capsys)
+    assert code == 2 and "no static.ply" in err

@@ -21,8 +21,9 @@ def _parse_size(ctx, param, value):
 
 @click.command("map")
 @click.argument("run_dir", type=click.Path(path_type=Path), default=Path("."), required=False)
-@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("map"), show_default=True,
-              help="Output folder: static.ply, dynamic.ply, views/, map.json.")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=None,
+              help="Output folder: static.ply, dynamic.ply, views/, map.json (default RUN/map, where "
+                   "`droidw view RUN` finds it).")
 @click.option("--minutes", type=float, default=8.0, show_default=True,
               help="Time budget; the map stops early when it is spent (map.json says what ended it).")
 @click.option("--steps", type=click.IntRange(min=1), default=200, show_default=True,
@@ -50,7 +51,7 @@ def map_command(run_dir, out_dir, minutes, steps, object_steps, size, holdout_ev
 
     \b
     Examples:
-      droidw map run/ --out map/
+      droidw map run/                    # writes run/map/; then: droidw view run/
       droidw map run/ --out map/ --minutes 3 --size 128x96
       droidw map run/ --out map-nomask/ --no-masks
     """
@@ -62,6 +63,7 @@ def map_command(run_dir, out_dir, minutes, steps, object_steps, size, holdout_ev
                            object_steps=object_steps, minutes=minutes, seed=seed, rasteriser=rasteriser)
     except ValueError as exc:
         raise InputError(str(exc)) from None
+    out_dir = out_dir if out_dir is not None else run_dir / "map"
     progress = not quiet and sys.stderr.isatty()
     doc = run_map(run_dir, out_dir, params, input_path, progress, echo=lambda m: click.echo(m, err=True))
     g, h = doc["gaussians"], doc["heldout"]["mean"]
