@@ -5,7 +5,8 @@ G_d^id(t) holds the Gaussians of object ``id`` at keyframe time t, with no motio
 for the static map, on the same pixel grid).  The scene at t is the static map plus
 every object's Gaussians of t (Eq. 16); the object Gaussians of keyframe j are fitted to its dynamic pixels
 (the object masks) with the static map fixed: ``object_steps`` Adam steps of the static map's colour and
-depth losses, each rendering only the window around the objects (a crop of the camera).
+depth losses, each rendering only the window around the objects (a crop of the camera).  Every keyframe
+gets its Gaussians; a short budget thins out the steps evenly (:class:`~.static_map.Pace`).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from droidw_cli.gaussians.losses import colour_loss, depth_loss
 from droidw_cli.gaussians.model import Gaussians
 from droidw_cli.gaussians.optim import GaussianAdam
 from droidw_cli.gaussians.params import MapParams
-from droidw_cli.gaussians.static_map import Deadline, backproject, camera, stride_grid
+from droidw_cli.gaussians.static_map import Deadline, Pace, backproject, camera, stride_grid
 
 PAD = 8  # pixels of context around the objects' window
 
@@ -39,10 +40,8 @@ def fit_objects(inputs: MapInputs, static: Gaussians, params: MapParams, rasteri
     parts, steps, ended, fitted = [], 0, "steps", 0
     todo = [j for j in range(len(kf)) if (kf.object_ids[j] >= 0).any()]
     fixed = static.detached()
-    for j in tqdm(todo, desc="objects", unit="keyframe", disable=not progress, dynamic_ncols=True):
-        if deadline.over():
-            ended = "time budget"
-            break
+    pace = Pace(deadline, 1.0)
+    for n_done, j in enumerate(tqdm(todo, desc="objects", unit="keyframe", disable=not progress, dynamic_ncols=True)):
         ids = kf.object_ids[j]
         pick = (ids >= 0) & (kf.depth[j] > 0)
         if not pick.any():
@@ -63,7 +62,7 @@ def fit_objects(inputs: MapInputs, static: Gaussians, params: MapParams, rasteri
                                "opacity_logits": params.lr_opacity, "log_scales": params.lr_scale,
                                "quats": params.lr_rotation})
         for _ in range(params.object_steps):
-            if deadline.over():
+            if pace.behind((n_done + 1) / len(todo)):
                 ended = "time budget"
                 break
             out = rasteriser.render(Gaussians.cat([fixed, opt.g]), cam)

@@ -1,11 +1,13 @@
 """The static map (ADD-SLAM, "static map"): Gaussians from the keyframes' static pixels, poses fixed.
 
-Keyframes are taken in time order.  Each one first *densifies* the map: the map is rendered at its pose and a
+Keyframes are taken in time order.  Each one first *densifies* the map (always, whatever the time budget, so
+that every keyframe is covered): the map is rendered at its pose and a
 new Gaussian is put on every ``init_stride``-th pixel that is static (not in the dilated dynamic mask), has a
 depth d, and whose rendered opacity is below ``densify_alpha`` (0.8), at X = T_wc · d K⁻¹ (u, v, 1)ᵀ, with the
 pixel's colour, opacity ``init_opacity`` and a round standard deviation of ``init_sigma`` · stride pixels at
 depth d (σ = init_sigma · stride · d / f).  Then the map takes its share of Adam steps, half of them on the new
-keyframe and half on a random earlier one; a final ``refine_fraction`` of the steps go to random keyframes.
+keyframe and half on a random earlier one, paced so that a short budget thins the steps out evenly
+(:class:`Pace`); a final ``refine_fraction`` of the steps go to random keyframes.
 Each step renders one keyframe and minimises (``losses``)
 
     L = L_colour(static ∧ has depth) + w_d L_depth(static ∧ has depth) + w_s L_iso,
@@ -41,6 +43,21 @@ class Deadline:
 
     def over(self) -> bool:
         return time.perf_counter() - self.start >= self.seconds
+
+
+class Pace:
+    """Spreads a budget over a loop: after a fraction ``done`` of the loop, at most ``done`` × ``share`` of the
+    deadline's time should have passed (so that a short budget thins the steps out instead of leaving the
+    last keyframes unmapped)."""
+
+    def __init__(self, deadline: Deadline, share: float) -> None:
+        self.deadline = deadline
+        self.t0 = time.perf_counter()
+        self.available = max(0.0, deadline.start + deadline.seconds - self.t0)
+        self.share = share
+
+    def behind(self, done: float) -> bool:
+        return self.deadline.over() or time.perf_counter() - self.t0 > done * self.share * self.available
 
 
 def camera(inputs: MapInputs, views: Views, j: int) -> Camera:
@@ -128,21 +145,20 @@ class StaticMapper:
         per_kf = [incremental // k + (1 if j < incremental % k else 0) for j in range(k)]
         g, opt, added = None, None, 0
         ended = "steps"
+        pace = Pace(self.deadline, 1 - p.refine_fraction)
         bar = tqdm(total=p.steps, desc="static map", unit="step", disable=not self.progress, dynamic_ncols=True)
         try:
-            for j in range(k):
-                if self.deadline.over():
-                    ended = "time budget"
-                    break
+            for j in range(k):  # every keyframe adds its Gaussians, even when the budget allows it no steps
                 g, opt, n = self.densify(g, opt, j)
                 added += n
                 for s in range(per_kf[j]):
-                    if self.deadline.over():
+                    if pace.behind((j + 1) / k):
+                        ended = "time budget"
                         break
                     pick = j if s % 2 == 0 else int(torch.randint(0, j + 1, (1,), generator=self.gen))
                     self.losses.append(self.step(opt, pick))
                     bar.update(1)
-            while self.steps_done < p.steps and ended == "steps":
+            while self.steps_done < p.steps:
                 if self.deadline.over():
                     ended = "time budget"
                     break
@@ -157,5 +173,5 @@ class StaticMapper:
         opt.keep(keep)
         g = opt.g.detached()
         return g, {"steps": self.steps_done, "ended": ended, "added": added, "pruned": pruned,
-                   "keyframes_used": int(min(k, j + 1)), "final_loss": self.losses[-1] if self.losses else None,
+                   "final_loss": self.losses[-1] if self.losses else None,
                    "scene_depth": self.scene_depth}
