@@ -154,7 +154,6 @@ def load_inputs(run_dir: Path, params: MapParams, input_path: Path | None = None
     size = map_size(work, params)
     kf_index = np.asarray(npz["index"], dtype=np.int64)
     kf_set = set(kf_index.tolist())
-    frame_of = {round(float(t), 6): i for i, t in enumerate(traj.timestamps)}
     rest = [i for i in range(len(traj)) if i not in kf_set]
     held = rest[params.holdout_every // 2:: params.holdout_every]
     images, depths = _read_frames(source, prep, size, set(kf_set) | set(held), metric)
@@ -179,7 +178,6 @@ def load_inputs(run_dir: Path, params: MapParams, input_path: Path | None = None
             k = int(np.argmin(np.abs(npz["timestamps"] - t)))
             dyn[j] = _grid_to(size, _dilate(npz["dynamic"][k], params.mask_dilate).astype(np.uint8),
                               cv2.INTER_NEAREST) > 0
-    del frame_of
     heldout = Views(np.array(held, dtype=np.int64), held_ts, traj.poses[held],
                     np.stack([images[i] for i in held]) if held else np.zeros((0, *size, 3), np.float32), dynamic=dyn)
     return MapInputs(kf, heldout, size, scaled_intrinsics(npz["intrinsics"], work, size), metric, has_masks,

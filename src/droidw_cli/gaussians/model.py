@@ -14,7 +14,7 @@ Dynamic (temporal) Gaussians (ADD-SLAM Eq. 15) also carry a time ``t`` and an ``
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import torch
 
@@ -59,7 +59,6 @@ class Gaussians:
     dc: torch.Tensor
     t: torch.Tensor | None = None
     object_id: torch.Tensor | None = None
-    extra: dict = field(default_factory=dict)
 
     TRAINABLE = ("means", "log_scales", "quats", "opacity_logits", "dc")
 

@@ -29,8 +29,6 @@ deterministic (unique sort keys, sequential ``index_add``).
 
 from __future__ import annotations
 
-import math
-
 import torch
 
 from droidw_cli.gaussians.camera import Camera
@@ -168,5 +166,4 @@ def footprint_pixels(radius: torch.Tensor) -> int:
     return int(((2 * radius + 1) ** 2 * (radius > 0)).sum())
 
 
-__all__ = ["TorchRasteriser", "project", "pair_list", "footprint_pixels", "ALPHA_MIN", "ALPHA_MAX", "LOW_PASS",
-           "math"]
+__all__ = ["TorchRasteriser", "project", "pair_list", "footprint_pixels", "ALPHA_MIN", "ALPHA_MAX", "LOW_PASS"]
