@@ -25,6 +25,7 @@ COMMANDS: dict[str, tuple[str, str, str]] = {
     "synth": ("droidw_cli.commands.synth", "synth", "Generate a synthetic dynamic-scene sequence with exact ground truth."),
     "batch": ("droidw_cli.commands.batch", "batch", "Track and evaluate every sequence of a manifest (Ray for parallel runs)."),
     "view": ("droidw_cli.commands.view", "view", "Show a run in the rerun viewer, or save it as an .rrd file."),
+    "map": ("droidw_cli.commands.map", "map_command", "Fit a 3D Gaussian map to a run: static scene, objects over time."),
 }
 
 
@@ -60,6 +61,7 @@ def cli() -> None:
       droidw export ply run/ --out static.ply
       droidw batch manifest.yaml --out runs/ --workers 4
       droidw view run/ --save run.rrd
+      droidw map run/ --out map/
     """
 
 

@@ -11,7 +11,8 @@ y down, z forward):
   its pinhole and keyframe image;
 * ``uncertainty``: the keyframe with its uncertainty u blended over it (inferno:
   dark = low, bright = high), and ``stats/mean_uncertainty``;
-* ``run``: a text summary of ``run.json``.
+* ``run``: a text summary of ``run.json``;
+* with a ``droidw map`` folder, its Gaussians (:mod:`droidw_cli.export.rrd_map`).
 
 Timelines: ``frame`` (the input frame index) and ``time`` (seconds since the
 first frame).
@@ -178,7 +179,17 @@ def log_run(rec, run: Run, progress: bool = False, stride: int = 1) -> dict:
             "static_points": int(static_points), "dynamic_points": dynamic_total, "note": note}
 
 
-def save_rrd(run: Run, path: Path, progress: bool = False, stride: int = 1) -> dict:
+def _log_map(rec, run: Run, map_dir: Path | None, counts: dict) -> None:
+    if map_dir is None:
+        return
+    from droidw_cli.export.rrd_map import log_map
+
+    t0 = float(run.timestamps[0]) if len(run.timestamps) else 0.0
+    counts["gaussians"] = log_map(rec, map_dir, t0, np.asarray(run.npz["timestamps"], dtype=np.float64),
+                                  np.asarray(run.npz["index"], dtype=np.int64))
+
+
+def save_rrd(run: Run, path: Path, progress: bool = False, stride: int = 1, map_dir: Path | None = None) -> dict:
     """Write ``run`` to an .rrd file atomically (no viewer, works headless); returns the counts."""
     rr = require_rerun()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -187,6 +198,7 @@ def save_rrd(run: Run, path: Path, progress: bool = False, stride: int = 1) -> d
     try:
         rec.save(str(tmp))
         counts = log_run(rec, run, progress, stride)
+        _log_map(rec, run, map_dir, counts)
         rec.flush()
         rec.disconnect()
         os.replace(tmp, path)
@@ -196,7 +208,7 @@ def save_rrd(run: Run, path: Path, progress: bool = False, stride: int = 1) -> d
             tmp.unlink()
 
 
-def show(run: Run, progress: bool = False, stride: int = 1) -> dict:
+def show(run: Run, progress: bool = False, stride: int = 1, map_dir: Path | None = None) -> dict:
     """Spawn a rerun viewer and log ``run`` into it."""
     rr = require_rerun()
     headless = not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
@@ -206,5 +218,6 @@ def show(run: Run, progress: bool = False, stride: int = 1) -> dict:
     rec = rr.RecordingStream("droidw")
     rec.spawn()
     counts = log_run(rec, run, progress, stride)
+    _log_map(rec, run, map_dir, counts)
     rec.flush()
     return counts
