@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from cli_run import run
+from tiny_runs import track_tiny_clip
 
 #: measured on this tiny run (80×60 map, 40 steps): static-pixel PSNR of the held-out frames 17.98 dB;
 #: the bound leaves 2.5 dB of margin (the run itself, not the map, is what may change)
@@ -19,23 +20,7 @@ PSNR_BOUND = 15.5
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory) -> Path:
     """A real `droidw track` run of a short synthetic clip with walkers (one torch thread: seconds)."""
-    import torch
-
-    from droidw_cli.synth import SynthConfig, write_sequence
-    from droidw_cli.track import run_track
-
-    root = tmp_path_factory.mktemp("map")
-    cfg = SynthConfig.preset("dynamic", seed=3, frames=24, width=160, height=120, fps=10.0)
-    write_sequence(cfg, root / "seq", video=False, progress=False)
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        run_track(root / "seq", root / "run", None, "cpu", "fast",
-                  ("io.target_area=19200", "motion_filter.thresh=1.0", "frontend.keyframe_thresh=1.0"),
-                  progress=False)
-    finally:
-        torch.set_num_threads(before)
-    return root / "run"
+    return track_tiny_clip(tmp_path_factory.mktemp("map"), 24)
 
 
 @pytest.fixture(scope="module")

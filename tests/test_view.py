@@ -9,28 +9,13 @@ from pathlib import Path
 import pytest
 
 from cli_run import run
+from tiny_runs import track_tiny_clip
 
 
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory) -> Path:
     """A real `droidw track` run of a short synthetic clip (one torch thread: a few seconds)."""
-    import torch
-
-    from droidw_cli.synth import SynthConfig, write_sequence
-    from droidw_cli.track import run_track
-
-    root = tmp_path_factory.mktemp("view")
-    cfg = SynthConfig.preset("dynamic", seed=3, frames=20, width=160, height=120, fps=10.0)
-    write_sequence(cfg, root / "seq", video=False, progress=False)
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        run_track(root / "seq", root / "run", None, "cpu", "fast",
-                  ("io.target_area=19200", "motion_filter.thresh=1.0", "frontend.keyframe_thresh=1.0"),
-                  progress=False)
-    finally:
-        torch.set_num_threads(before)
-    return root / "run"
+    return track_tiny_clip(tmp_path_factory.mktemp("view"), 20)
 
 
 def entity_rows(path: Path) -> dict[str, int] | None:

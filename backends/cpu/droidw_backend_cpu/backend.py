@@ -126,6 +126,11 @@ class CpuBackend(BABackend):
 
     # --------------------------------------------------------------- interface
     def reproject(self, state: BAState, ii: Tensor, jj: Tensor, min_depth: float = 0.05) -> tuple[Tensor, Tensor]:
+        st, ii, jj = self._reproject_inputs(state, ii, jj)
+        return self._project(st, ii, jj, min_depth)
+
+    def _reproject_inputs(self, state: BAState, ii: Tensor, jj: Tensor) -> tuple[BAState, Tensor, Tensor]:
+        """The prepared state and the edge indices as long tensors on the device, checked: (E,) each, in range."""
         st, _ = self._prepare(state)
         ii = ii.to(device=self.device, dtype=torch.long)
         jj = jj.to(device=self.device, dtype=torch.long)
@@ -134,7 +139,7 @@ class CpuBackend(BABackend):
         if ii.numel() and (int(torch.minimum(ii.min(), jj.min())) < 0
                            or int(torch.maximum(ii.max(), jj.max())) >= st.num_frames):
             raise ValueError(f"edge index out of range for {st.num_frames} frames")
-        return self._project(st, ii, jj, min_depth)
+        return st, ii, jj
 
     def uncertainty_weights(self, state: BAState, params: BAParams) -> Tensor | None:
         """u (N, HW) used to weight the BA, or None when the BA runs unweighted."""

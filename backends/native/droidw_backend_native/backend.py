@@ -81,14 +81,7 @@ class NativeBackend(CpuBackend):
 
     # --------------------------------------------------------------- interface
     def reproject(self, state: BAState, ii: Tensor, jj: Tensor, min_depth: float = 0.05) -> tuple[Tensor, Tensor]:
-        st, _ = self._prepare(state)
-        ii = ii.to(device=self.device, dtype=torch.long)
-        jj = jj.to(device=self.device, dtype=torch.long)
-        if ii.ndim != 1 or ii.shape != jj.shape:
-            raise ValueError(f"ii and jj must both have shape (E,), got {tuple(ii.shape)} and {tuple(jj.shape)}")
-        if ii.numel() and (int(torch.minimum(ii.min(), jj.min())) < 0
-                           or int(torch.maximum(ii.max(), jj.max())) >= st.num_frames):
-            raise ValueError(f"edge index out of range for {st.num_frames} frames")
+        st, ii, jj = self._reproject_inputs(state, ii, jj)
         k = build.load_kernels()
         return tuple(k.reproject(relative_rows(st.poses, ii, jj), st.disps.contiguous(), st.intrinsics,
                                  ii.contiguous(), float(min_depth)))
