@@ -1,7 +1,8 @@
 """Epipolar motion segmentation: movers are what the dominant rigid motion cannot explain.
 
-droidw uses this during initialisation only.  There the learned uncertainty
-cannot separate movers yet: its evidence is the multi-view geometry, and that
+droidw masks every window edge with this (slam/frontend.py), from the first
+keyframes on.  There the learned uncertainty cannot separate movers yet: its
+evidence is the multi-view geometry, and that
 is exactly what movers covering a third of the view corrupt before any map
 exists (DROID-W leans on a metric mono-depth prior there, which droidw cannot
 obtain).  Two views of a rigid scene obey the epipolar constraint
@@ -11,9 +12,18 @@ half of the confident pixels, and pixels far from their epipolar line move.
 
 Per edge (i, j), on the block centres of the 1/8 grid (x_i, x_j = x_i + flow):
 
-* F by least median of squares (OpenCV, deterministic) on the pixels whose
-  correspondence confidence is at least ``min_weight`` (every n-th of them, at
-  most ``FIT_POINTS`` and ``FIT_SHARE`` of the grid);
+* F by RANSAC (OpenCV's 7-point RANSAC, whose generator starts from the same
+  state on every call: deterministic; inliers within ``RANSAC_PX`` working px
+  of their epipolar line at a 640 px image diagonal), then ``REFITS`` times
+  the normalised 8-point fit to the pixels whose Sampson distance is within
+  2.5 σ, σ = 1.4826 · median (least median of squares' inlier rule), on the
+  pixels whose correspondence confidence is at least ``min_weight`` (every n-th
+  of them, at most ``FIT_POINTS`` and ``FIT_SHARE`` of the grid).  Least median
+  of squares alone, as before 2026-11-28, took 8-18 ms an edge on 768 points,
+  a tenth of a tracking run's CPU time (walk seed 1: about 10 s of 105), against
+  about 1.2 ms for these fits, which find the movers as well (docs/benchmarks.md,
+  "The epipolar fit by RANSAC and refits"; RANSAC alone at 1 px lost a sixth to
+  a third of the mover cells);
 * the Sampson distance of every block centre, in working-resolution pixels:
 
       d² = (x_jᵀ F x_i)² / ((F x_i)₁² + (F x_i)₂² + (Fᵀ x_j)₁² + (Fᵀ x_j)₂²)
@@ -57,6 +67,10 @@ MAX_MOVING = 0.75
 #: scaled with the diagonal) and at most DEGENERATE_RATIO × F's median Sampson distance
 DEGENERATE_PX = 1.0
 DEGENERATE_RATIO = 4.0
+#: RANSAC's inlier distance to the epipolar line (working px at a 640 px image diagonal, scaled with the diagonal)
+RANSAC_PX = 0.3
+#: 8-point refits of F to its robust inliers after RANSAC
+REFITS = 2
 
 
 def sampson_distance(fundamental: np.ndarray, x_i: np.ndarray, x_j: np.ndarray) -> np.ndarray:
@@ -67,6 +81,24 @@ def sampson_distance(fundamental: np.ndarray, x_i: np.ndarray, x_j: np.ndarray) 
     num = np.sum(b * fa, axis=1) ** 2
     den = fa[:, 0] ** 2 + fa[:, 1] ** 2 + ftb[:, 0] ** 2 + ftb[:, 1] ** 2
     return np.sqrt(num / np.maximum(den, 1e-12))
+
+
+def fit_fundamental(x_i: np.ndarray, x_j: np.ndarray, inlier_px: float) -> np.ndarray | None:
+    """F (3, 3) of the correspondences x_i → x_j (P, 2) by RANSAC and ``REFITS`` 8-point refits (module
+    docstring); None where OpenCV finds none."""
+    fundamental, _ = cv2.findFundamentalMat(x_i, x_j, cv2.FM_RANSAC, inlier_px, 0.999)
+    if fundamental is None or fundamental.shape != (3, 3):
+        return None
+    for _ in range(REFITS):
+        d = sampson_distance(fundamental, x_i, x_j)
+        keep = d <= max(2.5 * 1.4826 * float(np.median(d)), 1e-6)
+        if keep.sum() < MIN_POINTS:
+            break
+        refit, _ = cv2.findFundamentalMat(x_i[keep], x_j[keep], cv2.FM_8POINT)
+        if refit is None or refit.shape != (3, 3):
+            break
+        fundamental = refit
+    return fundamental
 
 
 def block_centres(height: int, width: int) -> np.ndarray:
@@ -96,9 +128,10 @@ def epipolar_distance(flow: np.ndarray, weight: np.ndarray, min_weight: float = 
         return None
     idx = np.flatnonzero(sel)
     fit_points = max(MIN_POINTS, min(FIT_POINTS, int(FIT_SHARE * h * w)))
-    idx = idx[:: -(-len(idx) // fit_points)]  # a regular subsample: LMedS time grows with the points
-    fundamental, _ = cv2.findFundamentalMat(x_i[idx], x_j[idx], cv2.FM_LMEDS)
-    if fundamental is None or fundamental.shape != (3, 3):
+    idx = idx[:: -(-len(idx) // fit_points)]  # a regular subsample: the fits' time grows with the points
+    scale = float(np.hypot(height, width)) / 640.0
+    fundamental = fit_fundamental(x_i[idx], x_j[idx], RANSAC_PX * scale)
+    if fundamental is None:
         return None
     sampson = sampson_distance(fundamental, x_i, x_j)
     homography, _ = cv2.findHomography(x_i[idx], x_j[idx], cv2.LMEDS)
@@ -107,7 +140,7 @@ def epipolar_distance(flow: np.ndarray, weight: np.ndarray, min_weight: float = 
         # fitted epipolar lines are arbitrary and a mover walking along them is missed: test against H
         transfer = np.linalg.norm(cv2.perspectiveTransform(x_i[None], homography)[0] - x_j, axis=1)
         med = float(np.median(transfer[idx]))
-        limit = min(DEGENERATE_PX * float(np.hypot(height, width)) / 640.0,
+        limit = min(DEGENERATE_PX * scale,
                     DEGENERATE_RATIO * float(np.median(sampson[idx])))
         if med <= limit:
             return transfer.reshape(h, w).astype(np.float32)
