@@ -14,7 +14,9 @@ Per edge (i, j), on the block centres of the 1/8 grid (x_i, x_j = x_i + flow):
 
 * F by RANSAC (OpenCV's 7-point RANSAC, whose generator starts from the same
   state on every call: deterministic; inliers within ``RANSAC_PX`` working px
-  of their epipolar line at a 640 px image diagonal), then ``REFITS`` times
+  of their epipolar line, scaled with the image diagonal above 640 px: DIS's
+  noise in working px does not shrink with the image, and at 120 × 160 a band
+  scaled down to 0.09 px left a fifth of the movers unmasked), then ``REFITS`` times
   the normalised 8-point fit to the pixels whose Sampson distance is within
   2.5 σ, σ = 1.4826 · median (least median of squares' inlier rule), on the
   pixels whose correspondence confidence is at least ``min_weight`` (every n-th
@@ -67,7 +69,7 @@ MAX_MOVING = 0.75
 #: scaled with the diagonal) and at most DEGENERATE_RATIO × F's median Sampson distance
 DEGENERATE_PX = 1.0
 DEGENERATE_RATIO = 4.0
-#: RANSAC's inlier distance to the epipolar line (working px at a 640 px image diagonal, scaled with the diagonal)
+#: RANSAC's inlier distance to the epipolar line (working px up to a 640 px image diagonal, scaled with larger ones)
 RANSAC_PX = 0.3
 #: 8-point refits of F to its robust inliers after RANSAC
 REFITS = 2
@@ -130,7 +132,7 @@ def epipolar_distance(flow: np.ndarray, weight: np.ndarray, min_weight: float = 
     fit_points = max(MIN_POINTS, min(FIT_POINTS, int(FIT_SHARE * h * w)))
     idx = idx[:: -(-len(idx) // fit_points)]  # a regular subsample: the fits' time grows with the points
     scale = float(np.hypot(height, width)) / 640.0
-    fundamental = fit_fundamental(x_i[idx], x_j[idx], RANSAC_PX * scale)
+    fundamental = fit_fundamental(x_i[idx], x_j[idx], RANSAC_PX * max(scale, 1.0))
     if fundamental is None:
         return None
     sampson = sampson_distance(fundamental, x_i, x_j)
