@@ -24,8 +24,8 @@ Per edge (i, j), on the block centres of the 1/8 grid (x_i, x_j = x_i + flow):
   of squares alone, as before 2026-11-28, took 8-18 ms an edge on 768 points,
   a tenth of a tracking run's CPU time (walk seed 1: about 10 s of 105), against
   about 1.2 ms for these fits, which find the movers as well (docs/benchmarks.md,
-  "The epipolar fit by RANSAC and refits"; RANSAC alone at 1 px lost a sixth to
-  a third of the mover cells);
+  "The epipolar fit by RANSAC and refits"; RANSAC alone at 1 px flagged 8-33 %
+  fewer of the mover cells);
 * the Sampson distance of every block centre, in working-resolution pixels:
 
       d² = (x_jᵀ F x_i)² / ((F x_i)₁² + (F x_i)₂² + (Fᵀ x_j)₁² + (Fᵀ x_j)₂²)
