@@ -133,7 +133,7 @@ def test_a_mover_under_pure_rotation_is_found_by_the_homography_test():
 
 def test_the_fit_recovers_the_rigid_geometry_through_outliers_and_noise_and_repeats_itself():
     """RANSAC alone stops at its inlier band (0.3 px); the refits on the robust inliers bring the fit to the
-    noise: the rigid points' Sampson distance to the true F is near zero, and the fit is deterministic."""
+    noise: the noise-free rigid points lie almost on the fitted F's epipolar lines, and the fit is deterministic."""
     from droidw_cli.dynamics.epipolar import fit_fundamental
 
     rng = np.random.default_rng(3)

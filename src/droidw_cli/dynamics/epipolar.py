@@ -23,7 +23,7 @@ Per edge (i, j), on the block centres of the 1/8 grid (x_i, x_j = x_i + flow):
   of them, at most ``FIT_POINTS`` and ``FIT_SHARE`` of the grid).  Least median
   of squares alone, as before 2026-11-28, took 8-18 ms an edge on 768 points,
   a tenth of a tracking run's CPU time (walk seed 1: about 10 s of 105), against
-  about 1.2 ms for these fits, which find the movers as well (docs/benchmarks.md,
+  about 1.2 ms for these fits, which find the movers about as well (fewer on follow seed 2; docs/benchmarks.md,
   "The epipolar fit by RANSAC and refits"; RANSAC alone at 1 px flagged 8-33 %
   fewer of the mover cells);
 * the Sampson distance of every block centre, in working-resolution pixels:
