@@ -10,7 +10,10 @@ brought to the BA's 1/8 grid exactly as the tracker does (working size by
 :class:`~droidw_cli.io.prepare.FramePreparer`, block-mean targets
 p*(g) = g + f̄/8, :func:`~droidw_cli.correspondence.grid.flow_to_target`).
 With the ground-truth depth of frame i on the grid and its static cells
-(no walker in the block), the motion-only problem
+(no walker in the block, and every pixel's true correspondence inside frame j:
+a pixel that leaves the view has no flow to measure, and where a start leads
+out of the view the warped DIS keeps the start, so with ``--seeded`` those cells
+read back whatever the start said), the motion-only problem
 
     min_T  Σ_g ρ(‖π(T · π⁻¹(g, D_i(g))) − p*(g)‖),   ρ Cauchy with σ = 1 grid px / 8,
 
@@ -123,6 +126,7 @@ def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], targ
     import cv2
 
     from droidw_cli.correspondence.dis import calc_deep, dis_objects, to_gray
+    from droidw_cli.correspondence.confidence import inside_mask
     from droidw_cli.correspondence.grid import area_downsample, flow_to_target
     from droidw_cli.geometry.camera import BA_SCALE, scale_intrinsics
     from droidw_cli.io.prepare import FramePreparer
@@ -152,7 +156,8 @@ def measure(preset: str, seed: int, gap: int, pairs: int, flows: list[str], targ
         depth = prep.depth(cv2.imread(str(folder / files["depth"][i]), cv2.IMREAD_UNCHANGED).astype(np.float32) / cfg.depth_scale)
         moving = prep.depth(cv2.imread(str(folder / files["mask"][i]), cv2.IMREAD_GRAYSCALE).astype(np.float32)) > 0
         grid_depth = area_downsample(np.where(depth > 0, 1.0 / np.maximum(depth, 1e-6), 0.0).astype(np.float32))
-        static = (area_downsample(((depth > 0) & ~moving).astype(np.float32)) == 1.0).ravel()
+        seen = inside_mask(induced_flow(depth, k_work, rel))  # a pixel that leaves the view has no flow to measure
+        static = (area_downsample(((depth > 0) & ~moving & seen).astype(np.float32)) == 1.0).ravel()
         points = backproject(1.0 / np.maximum(grid_depth, 1e-9), k_grid)[static]
         gray_i, gray_j = (to_gray(prep.image(rgb(n))) for n in (i, j))
         for name in flows:

@@ -17,7 +17,8 @@ Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distanc
   is optimised in a window only once its keyframes show enough rotation to
   constrain it, within bounds (:mod:`droidw_cli.slam.focal`).
 * Update for each later keyframe k, which starts at the damped
-  constant-velocity pose and its predecessor's disparity warped into it:
+  constant-velocity pose and its predecessor's disparity warped into it
+  (optionally placed first: :mod:`droidw_cli.slam.placement`):
   edges to its ``radius`` predecessors plus proximity edges of the newest
   keyframes inside the window (the newest ``window`` keyframes, widened up to
   ``window_max`` while they reach fewer than ``window_span`` input frames back:
@@ -73,11 +74,11 @@ from droidw_cli.slam.focal import clamp_focal, focal_observable
 from droidw_cli.slam.keyframes import KeyframeBuffer
 from droidw_cli.slam.optimizer import SharedState, run_window, window_state
 from droidw_cli.slam.parallax import homography_parallax
+from droidw_cli.slam.placement import place_keyframe
 from droidw_cli.slam.starts import adjacent_start, induced_start
 from droidw_cli.slam.two_view import two_view
 
-#: the two-view model of initialisation spans keyframes 0 … TWO_VIEW_SPAN (slam/two_view.py; DIS needs no
-#: initial flow over two keyframe gaps)
+#: the two-view model of initialisation spans keyframes 0 … TWO_VIEW_SPAN (slam/two_view.py)
 TWO_VIEW_SPAN = 2
 #: proximity edges are sought for the keyframes this close to the newest (DROID: t1 − 5)
 PROXIMITY_RECENT = 5
@@ -424,6 +425,7 @@ class Frontend(KeyframeMaps):
         """Window BA for the new keyframe k; returns its index after a possible removal."""
         f = self.fcfg
         lo = self._window_start(k)
+        place_keyframe(self, k, f.place_iters)
         pairs = graph.radius_pairs(k, lo, f.radius) + self._proximity(k, lo)
         self._match(pairs, use_prior=True)
         self._window_ba(lo, k, f.iters1)
@@ -449,11 +451,9 @@ class Frontend(KeyframeMaps):
         return lo
 
     def _window_ba(self, lo: int, k: int, iters: int) -> None:
-        """BA over the window's young edges.  Its gauge (pose and scale) is held by the two oldest keyframes
-        the edges still reach, not by the window's first two: edges retire after ``max_age`` iterations, and
-        a camera travelling into the scene never comes back to make proximity edges with its old keyframes,
-        so on the ``drive`` preset the window's first keyframes were 15-20 keyframes older than any of its
-        edges, the window's pose and scale were free (held by the damping alone), and the scale drifted."""
+        """BA over the window's young edges, its gauge (pose and scale) held by the two oldest keyframes the edges
+        still reach: edges retire after ``max_age`` iterations, and on the ``drive`` preset the window's first
+        keyframes were 15-20 older than any edge, so pose and scale were free (held by the damping alone)."""
         f = self.fcfg
         window = self.cache.young_pairs(self.shared.iterations, f.max_age, lo)
         window = graph.cap_edges(window, f.max_edges)
