@@ -52,7 +52,7 @@ def test_the_new_keyframe_moves_to_its_pose_and_its_predecessor_stays():
     fe, disp = _two_keyframes()
     before = _error(fe)
     iterations = fe.shared.iterations
-    place_keyframe(fe, 1, 4)
+    place_keyframe(fe, 1, fe.fcfg.place_iters)
     assert _error(fe) < 0.1 * before, (before, _error(fe))
     torch.testing.assert_close(fe.buffer.poses[0], torch.tensor([0, 0, 0, 0, 0, 0, 1.0]))
     torch.testing.assert_close(fe.buffer.disps[0], disp)  # the predecessor's disparity is put back
@@ -61,8 +61,7 @@ def test_the_new_keyframe_moves_to_its_pose_and_its_predecessor_stays():
 
 
 def test_no_placement_iterations_leave_the_guess():
-    fe, _ = _two_keyframes()
-    assert fe.fcfg.place_iters == 0  # the default: off (configs/default.yaml says why)
+    fe, _ = _two_keyframes(["frontend.place_iters=0"])
     place_keyframe(fe, 1, fe.fcfg.place_iters)
     torch.testing.assert_close(fe.buffer.poses[1], GUESS_K)
 

@@ -27,7 +27,8 @@ HALF_KITTI = {"width": 620, "height": 188, "fx": KITTI_CAMERA["fx"] / 2, "fy": K
               "cx": (KITTI_CAMERA["cx"] + 0.5) / 2 - 0.5, "cy": (KITTI_CAMERA["cy"] + 0.5) / 2 - 0.5}
 #: (clip, ATE bound in % of the path, heading bound in degrees).  Measured when written: the walk (7.3 m at
 #: 320 × 240, tracked at 76 800 px) 0.92 cm = 0.125 %, heading 0.26°; the drive (46.7 m at 620 × 188) 3.0 cm
-#: = 0.065 %, heading 0.21°.  Before the forward-motion work the 450-frame walk drifted 246 cm (1.2 %) with a
+#: = 0.065 %, heading 0.21°; with keyframe placement (slam/placement.py) 0.82 cm = 0.112 % and 1.08 cm = 0.023 %,
+#: headings 0.09° and 0.10°.  Before the forward-motion work the 450-frame walk drifted 246 cm (1.2 %) with a
 #: heading 43° off.
 CLIPS = {
     "forward": (SynthConfig.preset("forward", width=320, height=240, frames=150, seed=4), 0.4, 2.0),

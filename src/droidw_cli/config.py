@@ -160,7 +160,7 @@ class FrontendConfig:
     iters1: int = 3
     iters2: int = 2
     velocity_damping: float = 0.5
-    place_iters: int = 0  # BA iterations placing a new keyframe against its predecessor (slam/placement.py)
+    place_iters: int = 4  # BA iterations placing a new keyframe against its predecessor (slam/placement.py)
     proximity_stride: int = 2  # the proximity candidates' frame distance averages every s-th grid pixel (s² cheaper)
     skip_doomed: bool = False  # pass over a candidate that removal would drop at once (Frontend.doomed): fast rotation
     match_ahead: bool = True  # match a new keyframe's pair (k, k − 1) on the prefetch thread, beside k − 1's BA (slam/scout.py)

@@ -17,8 +17,8 @@ Every flow threshold is in pixels of the 1/8 grid (:mod:`droidw_cli.slam.distanc
   is optimised in a window only once its keyframes show enough rotation to
   constrain it, within bounds (:mod:`droidw_cli.slam.focal`).
 * Update for each later keyframe k, which starts at the damped
-  constant-velocity pose and its predecessor's disparity warped into it
-  (optionally placed first: :mod:`droidw_cli.slam.placement`):
+  constant-velocity pose and its predecessor's disparity warped into it, then
+  is placed against its predecessor alone (:mod:`droidw_cli.slam.placement`):
   edges to its ``radius`` predecessors plus proximity edges of the newest
   keyframes inside the window (the newest ``window`` keyframes, widened up to
   ``window_max`` while they reach fewer than ``window_span`` input frames back:

@@ -9,9 +9,8 @@ keeps 4-8 % of a start's error (``benchmarks/flow_bench.py --seeded`` with the
 start's translation 5 % off leaves 0.4 % on the ``drive`` preset at 2 and 8
 frames apart).  On a car the damped guess lags half a keyframe step behind,
 so that error came back in every (k, k − 2) edge, and the ``drive`` scale
-drifted by 3 % over 126 m (seed 3: 17.4 cm ATE).  Off by default: with 4 iterations the drive
-(seeds 1-3) went 9.88 / 3.16 / 17.41 → 6.89 / 3.90 / 5.80 cm, but the forward walk's seed 3 1.07 → 2.37 cm
-(configs/default.yaml, docs/benchmarks.md).
+drifted by 3 % over 126 m (seed 3: 17.4 cm ATE; 21.5 and 29.7 cm on seeds 4 and 5).  With 4 iterations
+the drive's seeds 1-5 read 6.9 / 3.9 / 5.8 / 5.3 / 4.0 cm (configs/default.yaml, docs/benchmarks.md).
 
 So the pair (k, k − 1) is matched first (usually ready from the scout,
 :mod:`droidw_cli.slam.scout`), and ``frontend.place_iters`` BA iterations
