@@ -22,7 +22,8 @@ block's correspondences is not the correspondence of the block's centre where th
 the image (perspective, slanted surfaces); the gap between ``dis`` and ``exact-start`` is the start's.
 Sequences come from ``benchmarks/.cache`` as in ``track_bench.py`` (``--static``: the same path with no
 movers).  The oracles know a frame by a hash of its working-size grey image; an edge whose image they
-do not know (the global BA's, matched from JPEG-stored images) stays DIS's, and the table counts them.
+do not know (the global BA's, matched from JPEG-stored images) stays DIS's, and the table counts the
+oracle's calls that knew both frames and those that did not (none in ``dis`` mode, which never asks).
 Columns: ATE over every frame and over keyframes (Sim(3)), ATE over the true path length, and the scale
 drift: the aligned estimate's step length over the true one, in the first and in the last third.
 """
@@ -220,7 +221,7 @@ def main() -> None:
     print("\nThe tracker with exact parts (default config, known calibration; drift: aligned step length over the "
           "true one, first / last third)")
     print_table(["sequence", "correspondence", "ATE [cm]", "ATE kf [cm]", "ATE [% path]", "scale first / last",
-                 "keyframes", "edges known / not"], rows)
+                 "keyframes", "calls known / not"], rows)
 
 
 if __name__ == "__main__":
