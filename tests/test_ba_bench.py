@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
-_spec = importlib.util.spec_from_file_location(
-    "ba_bench", Path(__file__).resolve().parents[1] / "benchmarks" / "ba_bench.py")
-bench = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bench)
+from bench_scripts import load
+
+bench = load("ba_bench")
 
 
 def test_window_measurement_runs_the_tracker_window():

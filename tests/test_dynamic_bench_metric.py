@@ -3,15 +3,10 @@ per sequence while it stays in view")."""
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
+from bench_scripts import load
 
-_spec = importlib.util.spec_from_file_location(
-    "dynamic_bench", Path(__file__).resolve().parents[1] / "benchmarks" / "dynamic_bench.py")
-bench = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(bench)
+bench = load("dynamic_bench")
 
 H, W = 20, 20  # 400 cells: "in view" is at least 2 cells (0.5 %)
 

@@ -3,23 +3,16 @@ differs from the block mean of the true per-pixel flow exactly where that flow i
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import torch
+from bench_scripts import load
 from scipy.spatial.transform import Rotation
 
-_path = Path(__file__).resolve().parents[1] / "benchmarks" / "oracle_bench.py"
-_spec = importlib.util.spec_from_file_location("oracle_bench", _path)
-bench = importlib.util.module_from_spec(_spec)
-sys.path.insert(0, str(_path.parent))
-_spec.loader.exec_module(bench)
+from droidw_cli.correspondence.grid import flow_to_target
+from droidw_cli.geometry.camera import scale_intrinsics
+from droidw_cli.geometry.projection import reproject
 
-from droidw_cli.correspondence.grid import flow_to_target  # noqa: E402
-from droidw_cli.geometry.camera import scale_intrinsics  # noqa: E402
-from droidw_cli.geometry.projection import reproject  # noqa: E402
+bench = load("oracle_bench")
 
 K_WORK = np.array([420.0, 420.0, 255.5, 191.5])
 H, W = 384, 512
