@@ -1,7 +1,7 @@
 """Tracking benchmark: ATE, keyframe ratio, frames/s, ms per frame by stage and peak memory.
 
     python benchmarks/track_bench.py [--presets walk walk-static wobble rotate stopgo fixed forward ride drive
-                                      follow follow-pan] [--seeds 1]
+                                      follow follow-static follow-pan] [--seeds 1]
                                      [--frames 0] [--config default] [--baseline] [--backend cpu]
                                      [--memory-minutes 0.5 1] [--set KEY=VALUE ...]
     python benchmarks/track_bench.py --presets --memory-minutes 1 10     # memory only
@@ -11,7 +11,8 @@ hand-held walk with movers, its static control, a near-still wobbling
 camera with people close in front, fast roll/pitch/yaw, stop-and-go, a fixed
 camera, and three cameras travelling down a street: a forward walk, a bike
 ride and a car drive at 10 frames/s, 1241×376 as on KITTI; two follow shots
-in the street, the camera panning to keep one walker in the middle; motion blur,
+in the street, the camera panning to keep one walker in the middle (``follow-static``: the same path with
+nobody in the street); motion blur,
 JPEG, noise and gain drift as each preset sets them), known calibration,
 640×480 unless the preset says otherwise.  "ATE [% path]" is the ATE over
 the length of the true path; "heading" the angle between the true and the
@@ -39,7 +40,7 @@ from _bench_common import cached_sequence, peak_mb, print_table, run_case_subpro
 
 STAGES = ("decode", "motion_filter", "features", "flow", "ba", "global_ba", "filler")
 PRESETS = ("walk", "walk-static", "wobble", "rotate", "stopgo", "fixed", "forward", "ride", "drive", "follow",
-           "follow-pan")
+           "follow-static", "follow-pan")
 HEADING_KEYFRAMES = 5  # the initial heading is measured over the first five keyframes
 
 

@@ -140,6 +140,8 @@ def test_follow_presets_and_cli(tmp_path, capsys):
         assert name in PRESETS and cfg.motion == name and (cfg.width, cfg.height, cfg.fps, cfg.frames) == (
             640, 480, 30.0, 450)
         assert cfg.blur > 0 and cfg.jpeg_quality == 75 and cfg.noise_std > 0 and cfg.movers == 3
+    control = SynthConfig.preset("follow-static", seed=2)  # the static control: the same path, nobody rendered
+    assert control == SynthConfig.preset("follow", seed=2, static=True) and control.n_movers == 0
     out = tmp_path / "follow"
     main(["synth", str(out), "--preset", "follow", "--frames", "3", "--size", "64x48"])
     assert "follow camera" in capsys.readouterr().out

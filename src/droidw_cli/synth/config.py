@@ -191,8 +191,9 @@ class SynthConfig:
         on the spot, 4 walkers), ``stopgo`` (handheld with full stops) and
         ``fixed`` (a still camera, 3 walkers, 300 frames).  Down a street:
         ``forward``, ``ride``, ``drive`` and ``forward-small``; follow shots
-        ``follow`` (walking 2.5-4 m behind a walker, panning with it) and
-        ``follow-pan`` (walking slowly while panning side-on with a passer-by).
+        ``follow`` (walking 2.5-4 m behind a walker, panning with it), its
+        static control ``follow-static`` (the same path, nobody in the street)
+        and ``follow-pan`` (walking slowly while panning side-on with a passer-by).
         """
         if name not in PRESETS:
             raise ValueError(f"unknown synth preset {name!r} (use one of {', '.join(sorted(PRESETS))})")
@@ -241,6 +242,8 @@ _FOLLOW = {**_STREET, "movers": 3, "blur": 0.4, "jpeg_quality": 75, "noise_std":
            "frames": 450}
 PRESETS.update({
     "follow": {**_FOLLOW, "motion": "follow"},
+    # its static control: the same path, the camera still aiming where the subject would be, nobody in the street
+    "follow-static": {**_FOLLOW, "motion": "follow", "static": True},
     "follow-pan": {**_FOLLOW, "motion": "follow-pan", "blur": 0.5},
 })
 
