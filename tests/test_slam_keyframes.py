@@ -72,6 +72,23 @@ def test_motion_filter_threshold_is_in_grid_pixels():
         assert is_kf is expected
 
 
+def test_the_accepted_flow_of_a_small_motion_is_kept_only_when_asked():
+    """An 8 px shift (1 grid px; carried on, 2 < START_MIN): too small to start the next frame's flow, so by default the
+    accepted candidate brings no flow; with ``keep_every_flow`` (rotation starts) it brings the one measured."""
+    big = _textured()
+    a, b = np.ascontiguousarray(big[:384, 32:544]), np.ascontiguousarray(big[:384, 24:536])
+    for keep in (False, True):
+        mf = MotionFilter(MotionFilterConfig(thresh=0.8, max_gap=100), keep_every_flow=keep)
+        mf.check(a, True)
+        mf.accept(a)
+        assert mf.check(b, True)[0]
+        mf.accept(b)
+        if keep:
+            assert mf.accepted_flow is not None and float(np.median(mf.accepted_flow[..., 0])) == pytest.approx(4.0, abs=0.3)
+        else:
+            assert mf.accepted_flow is None
+
+
 def test_fixed_camera_makes_no_keyframe_before_initialisation():
     img = np.ascontiguousarray(_textured()[:384, :512])
     mf = MotionFilter(MotionFilterConfig())

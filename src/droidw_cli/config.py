@@ -153,9 +153,8 @@ class FrontendConfig:
     proximity_max: int = 3
     proximity_gap: int = 4  # frames: a keyframe closer than this to its predecessor brings one proximity pair
     max_age: int = 50
-    # frame distance d = beta · full motion + (1 − beta) · translation only (keyframe removal, proximity edges).
-    # DROID-W's 0.75 counts a rotation almost fully, so a fast-rotating camera keeps its keyframes: 0.5 (DROID-SLAM's
-    # demo: 0.3) took rotate from 29 % keyframes, 0.93 cm to 19 %, 0.82 cm, walk 0.64 → 0.53 cm; 0.3: rotate 2.03 cm.
+    # frame distance d = beta · full motion + (1 − beta) · translation only (keyframe removal, proximity edges); 0.5 against
+    # DROID-W's 0.75 took rotate from 29 % keyframes, 0.93 cm to 19 %, 0.82 cm, walk 0.64 → 0.53 cm (0.3: rotate 2.03 cm)
     beta: float = 0.5
     iters1: int = 3
     iters2: int = 2
@@ -164,6 +163,7 @@ class FrontendConfig:
     proximity_stride: int = 2  # the proximity candidates' frame distance averages every s-th grid pixel (s² cheaper)
     skip_doomed: bool = False  # pass over a candidate that removal would drop at once (Frontend.doomed): fast rotation
     match_ahead: bool = True  # match a new keyframe's pair (k, k − 1) on the prefetch thread, beside k − 1's BA (slam/scout.py)
+    rotation_start: float = 32.0  # working px: adjacent pairs start from the rotation alone below this rest (slam/starts.py)
     robust_sigma: float = 1.0  # grid px: Cauchy reweighting of the window BA's residuals (0 = off); rotate 2.82 → 1.07 cm with backend.robust_sigma 0.5
 
     def __post_init__(self) -> None:
@@ -181,7 +181,7 @@ class FrontendConfig:
         for name, value in counts.items():
             if value < 1:
                 raise ValueError(f"frontend.{name} must be >= 1, got {value}")
-        for name in ("iters2", "place_iters", "nms", "proximity_max", "proximity_gap", "keyframe_thresh", "init_parallax", "window_span"):
+        for name in ("iters2", "place_iters", "nms", "proximity_max", "proximity_gap", "keyframe_thresh", "init_parallax", "window_span", "rotation_start"):
             if getattr(self, name) < 0:
                 raise ValueError(f"frontend.{name} must be >= 0, got {getattr(self, name)}")
         if not self.flow_thresh > 0:

@@ -75,7 +75,7 @@ from droidw_cli.slam.keyframes import KeyframeBuffer
 from droidw_cli.slam.optimizer import SharedState, run_window, window_state
 from droidw_cli.slam.parallax import homography_parallax
 from droidw_cli.slam.placement import place_keyframe
-from droidw_cli.slam.starts import adjacent_start, induced_start
+from droidw_cli.slam.starts import AdjacentStart, induced_start
 from droidw_cli.slam.two_view import two_view
 
 #: the two-view model of initialisation spans keyframes 0 … TWO_VIEW_SPAN (slam/two_view.py)
@@ -123,9 +123,8 @@ class Frontend(KeyframeMaps):
         # early matches of adjacent pairs made on another thread (slam/scout.py's Scout: matched(frame i,
         # frame j) → match_adjacent's result or None, hold() while this frontend matches, release() after)
         self.early = None
-        # the motion filter's flows between consecutive candidates (the scout's start(frame, previous frame)):
-        # they start the match of adjacent pairs
-        self.starts = None
+        self.starts = None  # the motion filter's flows between candidates (the scout's start(frame, previous))
+        self._adjacent = AdjacentStart(intrinsics8, cfg.frontend.rotation_start)  # their starts (slam/starts.py)
         # epipolar motion segmentation: (Sampson distance map, raw confidence) of the window's edges.
         # Not while the focal length is estimated: on lady-running with --calib auto the masks
         # flagged 27-41 % of the view (not only the runner) and the estimated fx fell from
@@ -213,7 +212,7 @@ class Frontend(KeyframeMaps):
         source to use (default: the frontend's)."""
         derive = _epipolar_of if self._segmenting else None
         source = self.correspondence if source is None else source
-        init = None if start is None else adjacent_start(start, image_i.shape[:2], invert=True)
+        init = None if start is None else self._adjacent(start, image_i.shape[:2], invert=True)
         return source.match_all([MatchCall(image_i, image_j, init, True)], derive, serial=True)[0]
 
     def _adjacent_start(self, i: int, j: int, size: tuple[int, int]) -> np.ndarray | None:
@@ -224,9 +223,9 @@ class Frontend(KeyframeMaps):
         fi, fj = self.buffer.frame_index[i], self.buffer.frame_index[j]
         later = self.starts.start(fi, fj)  # j → i
         if later is not None:
-            return adjacent_start(later, size, invert=True)
+            return self._adjacent(later, size, invert=True)
         earlier = self.starts.start(fj, fi)  # i → j
-        return None if earlier is None else adjacent_start(earlier, size, invert=False)
+        return None if earlier is None else self._adjacent(earlier, size, invert=False)
 
     def _matched_early(self, i: int, j: int) -> list[tuple[Correspondence, object]] | None:
         """The pair (i, j), (j, i) as :meth:`match_adjacent` made it on another thread (``self.early``),

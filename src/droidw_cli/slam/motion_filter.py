@@ -104,14 +104,16 @@ def _with_evidence(stats: FlowStats, grey_a: np.ndarray, grey_b: np.ndarray, flo
 class MotionFilter:
     """Decides keyframe candidates from flow to the last keyframe."""
 
-    def __init__(self, cfg: MotionFilterConfig, coarsest_scale: int = 0):
+    def __init__(self, cfg: MotionFilterConfig, coarsest_scale: int = 0, keep_every_flow: bool = False):
         self.cfg = cfg
+        self._keep_every = keep_every_flow  # accepted_flow also after motions too small to start the next frame
         self._dis = dis_objects("fast")  # DIS FAST, as calc_deep asks for it
         self._level = level_at(coarsest_scale, _SCALE)
         self._last: np.ndarray | None = None
         self._checked: tuple[np.ndarray, np.ndarray] | None = None  # (image, its small grey) of the last check
         self._since = 0
-        self._flow_last: np.ndarray | None = None  # the flow reference → the last checked frame (half size)
+        self._flow_last: np.ndarray | None = None  # the flow reference → the last checked frame (half size), as a start
+        self._flow_checked: np.ndarray | None = None  # the same flow, kept whatever its size
         #: the flow (half size, px) from the previous reference to the frame :meth:`accept` took, None for the first
         self.accepted_flow: np.ndarray | None = None
 
@@ -147,6 +149,7 @@ class MotionFilter:
         stats, flow, mag = self._flow(self._last, grey, quartile=waited, start=start)
         carried = stats.median * (self._since + 1) / self._since  # the next frame's median at constant velocity
         self._flow_last = flow if carried >= START_MIN else None
+        self._flow_checked = flow
         if initialised:
             ok = stats.mean >= self.cfg.thresh or self._since >= self.cfg.max_gap
         else:
@@ -161,7 +164,8 @@ class MotionFilter:
         checked = self._checked
         same = checked is not None and checked[0] is image
         self._last = checked[1] if same else grey_small(image)
-        self.accepted_flow = self._flow_last if same and self._since > 0 else None
+        kept = self._flow_checked if self._keep_every else self._flow_last
+        self.accepted_flow = kept if same and self._since > 0 else None
         self._checked = None
         self._since = 0
-        self._flow_last = None
+        self._flow_last = self._flow_checked = None

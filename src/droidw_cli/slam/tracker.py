@@ -226,7 +226,8 @@ class Tracker:
         # the motion filter and each new keyframe's edge pair to the previous one run ahead on the
         # prefetch thread, beside the main thread's BA (without a prefetch thread, on the main one)
         ahead = cfg.frontend.match_ahead and cfg.io.prefetch > 0
-        scout = Scout(MotionFilter(cfg.motion_filter, cfg.correspondence.coarsest_scale), timer,
+        scout = Scout(MotionFilter(cfg.motion_filter, cfg.correspondence.coarsest_scale, cfg.frontend.rotation_start > 0),
+                      timer,
                       (lambda a, b, start: fe.match_adjacent(a, b, start, self.correspondence)) if ahead else None,
                       self._extract if ahead and self.features is not None else None)
         fe.starts = scout
