@@ -126,14 +126,17 @@ def fit_rotation(flow: np.ndarray, intrinsics: np.ndarray, stride: int = 8, iter
 
 
 def rotation_flow(rot: np.ndarray, intrinsics: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """The flow (H, W, 2) float32, working px, of the rotation ``rot``: π(K R K⁻¹ x) − x."""
+    """The flow (H, W, 2) float32, working px, of the rotation ``rot``: π(K R K⁻¹ x) − x (rows and columns
+    broadcast, in float64)."""
     h, w = size
     fx, fy, cx, cy = (float(v) for v in intrinsics)
-    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
-    rays = np.stack([(xs - cx) / fx, (ys - cy) / fy, np.ones_like(xs)], -1).reshape(-1, 3)
-    p, _ = _rotate(rays, rot)
-    moved = np.stack([p[:, 0] * fx + cx, p[:, 1] * fy + cy], -1).reshape(h, w, 2)
-    return np.ascontiguousarray(moved - np.stack([xs, ys], -1), dtype=np.float32)
+    xs, ys = np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64)
+    xbar, ybar = ((xs - cx) / fx)[None, :], ((ys - cy) / fy)[:, None]
+    q = [rot[i, 0] * xbar + rot[i, 1] * ybar + rot[i, 2] for i in range(3)]
+    out = np.empty((h, w, 2), np.float32)
+    out[..., 0] = q[0] / q[2] * fx + cx - xs[None, :]
+    out[..., 1] = q[1] / q[2] * fy + cy - ys[:, None]
+    return out
 
 
 #: a rotation start needs the rotation to take at least a quarter of the flow: where it takes less (a car
