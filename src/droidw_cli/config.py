@@ -163,7 +163,7 @@ class FrontendConfig:
     proximity_stride: int = 2  # the proximity candidates' frame distance averages every s-th grid pixel (s² cheaper)
     skip_doomed: bool = False  # pass over a candidate that removal would drop at once (Frontend.doomed): fast rotation
     match_ahead: bool = True  # match a new keyframe's pair (k, k − 1) on the prefetch thread, beside k − 1's BA (slam/scout.py)
-    rotation_start: float = 32.0  # working px: adjacent pairs start from the rotation alone below this rest (slam/starts.py)
+    rotation_start: float = 4.0  # grid px: adjacent pairs start from the rotation alone below this rest (slam/starts.py)
     robust_sigma: float = 1.0  # grid px: Cauchy reweighting of the window BA's residuals (0 = off); rotate 2.82 → 1.07 cm with backend.robust_sigma 0.5
 
     def __post_init__(self) -> None:

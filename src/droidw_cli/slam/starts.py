@@ -39,10 +39,10 @@ translation.  Started from the
 rotation fitted to the motion filter's flow (:func:`fit_rotation`, which
 absorbs a little of a sideways step) it reads 0.93 cm.  Where the rotation
 takes less than a quarter of the flow (:data:`ROTATION_SHARE`; a car driving
-on) or more than ``rotation_start`` px are left, the whole flow still starts
+on) or more than ``rotation_start`` grid px are left, the whole flow still starts
 DIS: the expansion of a camera travelling into the scene is beyond what DIS
 finds alone (``drive`` seed 1: 6.47 → 16.67 cm with a rotation start
-wherever under 32 px were left).
+wherever under 4 grid px were left).
 """
 
 from __future__ import annotations
@@ -70,14 +70,14 @@ def adjacent_start(flow_half: np.ndarray, size: tuple[int, int], invert: bool, i
 
 
 class AdjacentStart:
-    """:func:`adjacent_start` with one tracker's settings: ``max_rest`` (``frontend.rotation_start``) and the
+    """:func:`adjacent_start` with one tracker's settings: ``max_rest`` (``frontend.rotation_start``, grid px) and the
     working-size intrinsics of the first grid intrinsics ``intrinsics8``, so that a start made on another
     thread (:mod:`droidw_cli.slam.scout`) does not depend on when a focal estimate came."""
 
-    def __init__(self, intrinsics8, max_rest: float):
+    def __init__(self, intrinsics8, max_rest_grid: float):
         k8 = np.asarray([float(v) for v in intrinsics8], dtype=np.float64)
         self.intrinsics = scale_intrinsics(k8, 1.0 / BLOCK)
-        self.max_rest = float(max_rest)
+        self.max_rest = float(max_rest_grid) * BLOCK  # working px
 
     def __call__(self, flow_half: np.ndarray, size: tuple[int, int], invert: bool) -> np.ndarray:
         return adjacent_start(flow_half, size, invert, self.intrinsics, self.max_rest)
