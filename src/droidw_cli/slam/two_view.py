@@ -101,14 +101,7 @@ def _homography(src: np.ndarray, dst: np.ndarray, thresh_px: float) -> tuple[np.
     return hom, np.linalg.norm(moved - dst, axis=1) <= thresh_px
 
 
-def _explained_by_homography(src: np.ndarray, dst: np.ndarray, thresh_px: float, share: float) -> bool:
-    """Does one homography (RANSAC, ``thresh_px``) take at least ``share`` of the points src → dst within
-    ``thresh_px``?"""
-    hom, taken = _homography(src, dst, thresh_px)
-    return hom is not None and float(np.mean(taken)) >= share
-
-
-def _epipolar_px(rot: np.ndarray, t: np.ndarray, pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
+def _epipolar_distance(rot: np.ndarray, t: np.ndarray, pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
     """Distance (normalised units) of each x̃_b from the epipolar line of x̃_a under the motion (R, t)."""
     tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
     lines = np.concatenate([pa, np.ones((len(pa), 1))], 1) @ (tx @ rot).T  # E x̃_a
@@ -133,7 +126,7 @@ def _plane_confirms(hom: np.ndarray, k: np.ndarray, t: np.ndarray, pa_off: np.nd
         norm = float(np.linalg.norm(tp))
         if norm < 1e-9:
             continue
-        err = float(np.median(_epipolar_px(rot, tp / norm, pa_off, pb_off)))
+        err = float(np.median(_epipolar_distance(rot, tp / norm, pa_off, pb_off)))
         if abs(float(unit @ tp)) / norm >= cos:
             same = min(same, err)
         else:
