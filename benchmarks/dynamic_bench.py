@@ -297,7 +297,7 @@ def one_auroc(args: argparse.Namespace) -> None:
     from droidw_cli.eval import evaluate_ate
     from droidw_cli.eval.dynamic import auroc
     from droidw_cli.io.calibration import Calibration
-    from droidw_cli.io.frames import open_source
+    from droidw_cli.io.input import open_source
     from droidw_cli.io.trajectory import Trajectory
     from droidw_cli.synth import SynthConfig, build_scene
 
