@@ -24,8 +24,9 @@ def run_case_subprocess(script: str, args: list[str]) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def track_source(source, calibration, overrides: list[str], backend: str = "cpu", config: str = "default"):
-    """Track a frame source with a config (default: ``default``) plus overrides; returns (result, seconds)."""
+def track_source(source, calibration, overrides: list[str], backend: str = "auto", config: str = "default"):
+    """Track a frame source with a config (default: ``default``) plus overrides and a BA backend (default
+    ``auto``, what ``droidw track`` takes: the native kernels where they build); returns (result, seconds)."""
     from droidw_cli.ba.registry import get_backend
     from droidw_cli.config import load_config
     from droidw_cli.correspondence import get_correspondence_source

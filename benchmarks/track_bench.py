@@ -2,7 +2,7 @@
 
     python benchmarks/track_bench.py [--presets walk walk-static wobble rotate stopgo fixed forward ride drive
                                       follow follow-static follow-pan] [--seeds 1]
-                                     [--frames 0] [--config default] [--baseline] [--backend cpu]
+                                     [--frames 0] [--config default] [--baseline] [--backend auto]
                                      [--memory-minutes 0.5 1] [--set KEY=VALUE ...]
     python benchmarks/track_bench.py --presets --memory-minutes 1 10     # memory only
 
@@ -105,7 +105,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[1])
     ap.add_argument("--config", default="default")
     ap.add_argument("--baseline", action="store_true", help="also run with uncertainty.enable=false")
-    ap.add_argument("--backend", default="cpu")
+    ap.add_argument("--backend", default="auto", help="BA backend (default auto, as droidw track: native where it builds)")
     ap.add_argument("--memory-minutes", type=float, nargs="*", default=[])
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--apart", action="store_true", help="walkers keep apart (SynthConfig.apart)")
