@@ -125,10 +125,9 @@ class Frontend(KeyframeMaps):
         self.early = None
         self.starts = None  # the motion filter's flows between candidates (the scout's start(frame, previous))
         self._adjacent = AdjacentStart(intrinsics8, cfg.frontend.rotation_start)  # their starts (slam/starts.py)
-        # epipolar motion segmentation: (Sampson distance map, raw confidence) of the window's edges.
-        # Not while the focal length is estimated: on lady-running with --calib auto the masks
-        # flagged 27-41 % of the view (not only the runner) and the estimated fx fell from
-        # 617 px to 17 px.
+        # epipolar motion segmentation: (Sampson distance map, raw confidence) of the window's edges.  Not while the
+        # focal length is estimated: on lady-running with --calib auto the masks flagged 27-41 % of the view (not
+        # only the runner) and the estimated fx fell from 617 px to 17 px.
         self._segmenting = (cfg.dynamics.epipolar and params.uncertainty.enable and feature_channels > 0
                             and params.optimize_focal == "none")
         self._epipolar: dict[tuple[int, int], tuple[np.ndarray, torch.Tensor]] = {}
@@ -167,7 +166,7 @@ class Frontend(KeyframeMaps):
         if not todo:
             return
         size = images[todo[0][0]].shape[:2]
-        init = [self._adjacent_start(i, j, size) if abs(i - j) == 1 else None for i, j in todo]
+        init: list[np.ndarray | None] = [None] * len(todo)  # adjacent pairs' starts: made below, for the calls only
         if use_prior:  # wider pairs from the map; adjacent ones as the scout matches them (the same bytes)
             prior = [n for n, (i, j) in enumerate(todo) if abs(i - j) > 1]
             if prior:
@@ -187,6 +186,8 @@ class Frontend(KeyframeMaps):
                     self._store(key, c, epipolar)
                 done.update([(i, j), (j, i)])
                 continue
+            if abs(i - j) == 1:
+                f0 = self._adjacent_start(i, j, size)
             calls.append(MatchCall(images[i], images[j], f0, both))
             keys.append([(i, j), (j, i)] if both else [(i, j)])
             done.update(keys[-1])
