@@ -13,6 +13,8 @@ uncertainty, BA, the filler's own flows) as in ``droidw track``:
 * ``exact-flow``: the true induced flow of every pixel instead of DIS's, brought to the 1/8 grid as the
   tracker does (the block mean, :func:`~droidw_cli.correspondence.grid.flow_to_target`): what a perfect
   flow would give;
+* ``exact-mask``: DIS as the tracker runs it, every grid cell of frame i that covers a mover's pixel (the
+  generator's mask) weighted zero: what a perfect dynamic mask would give;
 * ``exact-model``: the target of each grid cell is where the cell centre at the cell's mean inverse
   depth lands, exactly the BA's model (Eq. 1 on the grid): the control, whose error is the
   optimisation's alone.
@@ -42,7 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _bench_common import cached_sequence, print_table, run_case_subprocess  # noqa: E402
 from flow_bench import _listed, induced_flow  # noqa: E402
 
-MODES = ("dis", "exact-start", "exact-flow", "exact-model")
+MODES = ("dis", "exact-start", "exact-flow", "exact-model", "exact-mask")
 
 
 class GroundTruth:
@@ -57,6 +59,7 @@ class GroundTruth:
         self.folder, self.prep, self.depth_scale = folder, preparer, depth_scale
         self.poses = read_tum(folder / "groundtruth.txt").poses
         self.rgb, self.depths = _listed(folder / "rgb.txt"), _listed(folder / "depth.txt")
+        self.masks = _listed(folder / "mask.txt") if (folder / "mask.txt").exists() else []
         self.index = {}
         for n, name in enumerate(self.rgb):
             image = preparer.image(cv2.cvtColor(cv2.imread(str(folder / name)), cv2.COLOR_BGR2RGB))
@@ -77,6 +80,17 @@ class GroundTruth:
             raw = cv2.imread(str(self.folder / self.depths[n]), cv2.IMREAD_UNCHANGED).astype(np.float32)
             self._depth[n] = self.prep.depth(raw / self.depth_scale)
         return self._depth[n]
+
+    def mover_cells(self, n: int, grid: tuple[int, int]) -> np.ndarray:
+        """(h, w) bool: the 1/8-grid cells of frame n with any mover pixel (none without masks)."""
+        import cv2
+
+        if not self.masks:
+            return np.zeros(grid, bool)
+        raw = cv2.imread(str(self.folder / self.masks[n]), cv2.IMREAD_UNCHANGED)
+        small = self.prep.depth((raw > 0).astype(np.float32))  # nearest neighbour to the working size
+        h, w = grid
+        return small[: h * 8, : w * 8].reshape(h, 8, w, 8).max(axis=(1, 3)) > 0
 
     def relative(self, a: int, b: int) -> np.ndarray:
         """The 4×4 motion from camera a to camera b."""
@@ -106,6 +120,8 @@ def model_flow(depth: np.ndarray, intrinsics: np.ndarray, rel: np.ndarray) -> np
 
 def oracle_source(mode: str, truth: GroundTruth, cfg):
     """A DIS correspondence source whose keyframe edges are made as ``mode`` says (module docstring)."""
+    import torch
+
     from droidw_cli.correspondence.base import MatchCall
     from droidw_cli.correspondence.dis import DISCorrespondence, to_gray
 
@@ -133,7 +149,13 @@ def oracle_source(mode: str, truth: GroundTruth, cfg):
                 if pair is not None:
                     make = truth.pixel_flow if mode == "exact-flow" else truth.model_flow
                     fwd, bwd = make(*pair), make(*pair[::-1])
-            return super()._scored(gray_i, gray_j, fwd, bwd)
+            out = super()._scored(gray_i, gray_j, fwd, bwd)
+            if mode == "exact-mask":
+                pair = self._pair(gray_i, gray_j)
+                if pair is not None:
+                    movers = torch.from_numpy(truth.mover_cells(pair[0], tuple(out.weight.shape[:2])))
+                    out.weight[movers] = 0.0
+            return out
 
     return Oracle(cfg)
 

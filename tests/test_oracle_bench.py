@@ -56,3 +56,24 @@ def test_the_block_mean_of_the_true_flow_leaves_the_model_only_where_the_flow_is
         seen = (depth.reshape(H // 8, 8, W // 8, 8) > 0).all(axis=(1, 3))
         gap = np.linalg.norm(exact - model, axis=-1)[seen]
         assert lo <= float(np.mean(gap)) < hi
+
+
+def test_the_mask_oracle_zeroes_every_cell_a_movers_pixel_touches(tmp_path):
+    """``exact-mask``: a cell of the 1/8 grid is a mover's when any of its working-size pixels is, after the
+    source frame went through the tracker's preparation (resize and crop)."""
+    import cv2
+
+    from droidw_cli.io.prepare import FramePreparer
+
+    mask = np.zeros((480, 640), np.uint8)
+    mask[100:103, 200:202] = 1  # a few source pixels: one or two cells at the working size 384 × 512
+    cv2.imwrite(str(tmp_path / "m.png"), mask)
+    truth = bench.GroundTruth.__new__(bench.GroundTruth)
+    truth.folder, truth.masks = tmp_path, ["m.png"]
+    truth.prep = FramePreparer((480, 640), K_WORK, target_area=H * W)
+    cells = truth.mover_cells(0, (H // 8, W // 8))
+    assert cells.shape == (48, 64) and 1 <= cells.sum() <= 4
+    ys, xs = np.nonzero(cells)
+    assert set(ys) <= {9, 10} and set(xs) <= {19, 20}  # (100..102) · 0.8 / 8 and (200..201) · 0.8 / 8
+    truth.masks = []
+    assert not truth.mover_cells(0, (48, 64)).any()

@@ -68,12 +68,17 @@ def test_the_rotation_of_a_panning_camera_is_found_under_its_parallax():
 
 def test_a_rotation_start_only_where_dis_finds_the_rest_alone():
     """``rotation_start``: the rotation's flow when the rest of the flow averages under ``max_rest`` px, else
-    the whole flow (a camera travelling into the scene needs its expansion in the start)."""
+    the whole flow (a camera travelling into the scene needs its expansion in the start); a flow DIS takes as
+    its initial flow (not warped out) stays whole."""
+    from droidw_cli.correspondence.dis import WARP_MIN
     from droidw_cli.slam.starts import rotation_start
 
     pan, _ = _scene_flow([0.0, np.radians(4.0), 0.0], [0.05, 0.0, 0.0])
     turned = rotation_start(pan, K, max_rest=8.0)
     assert turned is not pan and float(np.abs(pan - turned).mean()) > 0.1  # the parallax is left to DIS
+    small, _ = _scene_flow([0.0, np.radians(1.5), 0.0], [0.02, 0.0, 0.0])  # about 7 px: DIS's initial flow
+    assert np.abs(small).mean() < WARP_MIN * 400 < np.abs(pan).mean()  # 400: the 240 × 320 image's diagonal
+    assert rotation_start(small, K, max_rest=8.0) is small
     drive, _ = _scene_flow([0.0, np.radians(1.0), 0.0], [0.0, 0.0, 2.5])  # 2.5 m forward: large expansion
     assert rotation_start(drive, K, max_rest=8.0) is drive
     half = pan[::2, ::2] / 2
