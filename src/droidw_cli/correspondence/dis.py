@@ -142,7 +142,7 @@ def calc_deep(objects, gray_i: np.ndarray, gray_j: np.ndarray, start: np.ndarray
     """
     h, w = gray_i.shape[:2]
     if start is not None:
-        if float(np.abs(start).mean()) >= WARP_MIN * math.hypot(h, w):
+        if warped_out(start):
             return calc_warped(objects, gray_i, gray_j, start, level)
         return objects("seeded").calc(gray_i, gray_j, start)
     plain = objects("plain")
@@ -163,6 +163,12 @@ def calc_deep(objects, gray_i: np.ndarray, gray_j: np.ndarray, start: np.ndarray
 #: a start whose mean |component| reaches this share of the image diagonal is warped out (calc_warped); a smaller
 #: one is DIS's initial flow, which DIS keeps at small motions (13 px at 384 × 512)
 WARP_MIN = 0.02
+
+
+def warped_out(start: np.ndarray) -> bool:
+    """Whether :func:`calc_deep` warps a start (H, W, 2) out (:func:`calc_warped`) rather than hand it to DIS as
+    its initial flow: its mean |component| reaches :data:`WARP_MIN` of the image diagonal."""
+    return float(np.abs(start).mean()) >= WARP_MIN * math.hypot(*start.shape[:2])
 
 
 def calc_warped(objects, gray_i: np.ndarray, gray_j: np.ndarray, start: np.ndarray, level: int) -> np.ndarray:

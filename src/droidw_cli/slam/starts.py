@@ -52,14 +52,12 @@ it, and with this gate 0.28 (docs/benchmarks.md).
 
 from __future__ import annotations
 
-import math
-
 import cv2
 import numpy as np
 import torch
 
 from droidw_cli.correspondence.confidence import invert_flow
-from droidw_cli.correspondence.dis import WARP_MIN
+from droidw_cli.correspondence.dis import warped_out
 from droidw_cli.correspondence.grid import BLOCK
 from droidw_cli.geometry.camera import scale_intrinsics
 
@@ -163,8 +161,8 @@ def rotation_start(flow: np.ndarray, intrinsics: np.ndarray, max_rest: float) ->
     """The flow of the rotation that best explains ``flow`` (:func:`fit_rotation`), when what is left of
     ``flow`` beyond it averages under ``max_rest`` working px (DIS finds that alone) and under
     ``ROTATION_SHARE`` of the flow's own mean; else ``flow``.  A flow DIS would take as its initial flow
-    (under :data:`~droidw_cli.correspondence.dis.WARP_MIN`, not warped out) stays whole."""
-    if float(np.abs(flow).mean()) < WARP_MIN * math.hypot(*flow.shape[:2]):
+    (:func:`~droidw_cli.correspondence.dis.warped_out` false) stays whole."""
+    if not warped_out(flow):
         return flow
     rot = fit_rotation(flow, intrinsics)
     turned = rotation_flow(rot, intrinsics, flow.shape[:2])
