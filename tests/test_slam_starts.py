@@ -83,3 +83,13 @@ def test_a_rotation_start_only_where_dis_finds_the_rest_alone():
     assert rotation_start(drive, K, max_rest=8.0) is drive
     half = pan[::2, ::2] / 2
     np.testing.assert_array_equal(adjacent_start(half, (240, 320), False, K, 0.0), adjacent_start(half, (240, 320), False))
+
+
+def test_the_mean_flow_length_sums_as_numpys_norm():
+    """``mean_length`` (correspondence/grid.py) gives the very float of ``np.linalg.norm(flow, axis=-1).mean()``."""
+    from droidw_cli.correspondence.grid import mean_length
+
+    rng = np.random.default_rng(3)
+    for scale in (0.3, 7.0, 40.0):
+        flow = (rng.standard_normal((96, 128, 2)) * scale).astype(np.float32)
+        assert mean_length(flow) == float(np.linalg.norm(flow, axis=-1).mean())

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from droidw_cli.correspondence.confidence import invert_flow
-from droidw_cli.correspondence.grid import validate_image
+from droidw_cli.correspondence.grid import mean_length, validate_image
 from droidw_cli.runtime.threads import usable_cores
 
 
@@ -42,7 +42,7 @@ class Correspondence:
     @property
     def mean_flow(self) -> float:
         """Mean flow magnitude over all pixels, full-resolution px."""
-        return float(np.linalg.norm(self.flow, axis=-1).mean())
+        return mean_length(self.flow)
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,7 @@ from droidw_cli.config import CorrespondenceConfig
 from droidw_cli.correspondence.base import Correspondence, CorrespondenceSource, MatchCall
 from droidw_cli.correspondence.confidence import (flow_confidence, flow_map, inside_mask, invert_flow, remap,
                                                    sample_at_flow)
-from droidw_cli.correspondence.grid import area_downsample, flow_to_target, validate_flow, validate_image
+from droidw_cli.correspondence.grid import area_downsample, flow_to_target, mean_length, validate_flow, validate_image
 from droidw_cli.errors import ConfigError
 
 #: name → (OpenCV preset, overrides).  ``fine`` is FAST with its finest pyramid level at 1/2
@@ -302,4 +302,4 @@ class DISCorrespondence(CorrespondenceSource):
         size = (w // s, h // s)
         small = [cv2.resize(to_gray(im), size, interpolation=cv2.INTER_AREA) for im in (image_i, image_j)]
         flow = calc_deep(self._objects(MEAN_FLOW_PRESET), small[0], small[1], None, level_at(self.cfg.coarsest_scale, s))
-        return float(np.linalg.norm(flow, axis=-1).mean() * s)
+        return mean_length(flow) * s
