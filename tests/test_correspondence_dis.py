@@ -179,6 +179,7 @@ def test_fine_preset_is_fast_with_a_finer_pyramid_and_the_filler_uses_it_by_defa
     fine, fast = create_dis("fine"), create_dis("fast")
     assert fine.getFinestScale() == 1 and fast.getFinestScale() == 2
     assert fine.getPatchSize() == fast.getPatchSize() and fine.getPatchStride() == 6
+    assert fine.getVariationalRefinementIterations() == 0 < fast.getVariationalRefinementIterations()
     assert CorrespondenceConfig().quick_preset == "fine"
 
 

@@ -45,13 +45,18 @@ from droidw_cli.correspondence.confidence import (flow_confidence, flow_map, ins
 from droidw_cli.correspondence.grid import area_downsample, flow_to_target, mean_length, validate_flow, validate_image
 from droidw_cli.errors import ConfigError
 
-#: name → (OpenCV preset, overrides).  ``fine`` is FAST with its finest pyramid level at 1/2
-#: instead of 1/4 of the working size and a sparser patch grid: about FAST's cost, and on a
-#: 384 × 512 walk frame pair 0.04 px median deviation from a long MEDIUM run against FAST's 0.15.
+#: name → (OpenCV preset, overrides).  ``fine`` (the filler's flow) is FAST with its finest pyramid
+#: level at 1/2 instead of 1/4 of the working size, a sparser patch grid and no variational
+#: refinement: on a 384 × 512 walk frame pair 0.04 px median deviation from a long MEDIUM run
+#: against FAST's 0.15 (with FAST's 5 refinement iterations).  The refinement was 64 % of its time
+#: (21.2 against 7.7 ms a walk pair, one thread), and the filler's area average onto the grid smooths
+#: as much: ATE within 1 % (geometric mean of 13 runs) without it (docs/benchmarks.md, "The filler's
+#: flow without variational refinement").
 PRESETS = {
     "ultrafast": (cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST, {}),
     "fast": (cv2.DISOPTICAL_FLOW_PRESET_FAST, {}),
-    "fine": (cv2.DISOPTICAL_FLOW_PRESET_FAST, {"FinestScale": 1, "PatchStride": 6}),
+    "fine": (cv2.DISOPTICAL_FLOW_PRESET_FAST,
+             {"FinestScale": 1, "PatchStride": 6, "VariationalRefinementIterations": 0}),
     "medium": (cv2.DISOPTICAL_FLOW_PRESET_MEDIUM, {}),
 }
 

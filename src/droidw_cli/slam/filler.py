@@ -12,8 +12,9 @@ for all frames of the gap at once:
 2. the correspondence source's cheap targets a → t and b → t
    (:meth:`~droidw_cli.correspondence.base.CorrespondenceSource.quick_target`;
    for DIS one flow at the working resolution with ``correspondence.quick_preset``
-   ("fine": FAST with its finest level at 1/2 size; FAST left the 600-frame static
-   control at 0.51 cm, fine 0.34), area-averaged onto the grid: p*_at = p + f̄_at / 8);
+   ("fine": FAST with its finest level at 1/2 size and no variational refinement; FAST
+   left the 600-frame static control at 0.51 cm, fine 0.34), area-averaged onto the grid:
+   p*_at = p + f̄_at / 8);
 3. ``iters`` motion-only BA iterations (Eq. 4 with the keyframes' poses and
    disparities fixed), each pixel weighted by its keyframe's BA confidence,
    its uncertainty weight (DROID-W's clamp mapping, ``relative`` level over
