@@ -47,11 +47,11 @@ from droidw_cli.errors import ConfigError
 
 #: name → (OpenCV preset, overrides).  ``fine`` (the filler's flow) is FAST with its finest pyramid
 #: level at 1/2 instead of 1/4 of the working size, a sparser patch grid and no variational
-#: refinement: on a 384 × 512 walk frame pair 0.04 px median deviation from a long MEDIUM run
-#: against FAST's 0.15 (with FAST's 5 refinement iterations).  The refinement was 64 % of its time
-#: (21.2 against 7.7 ms a walk pair, one thread), and the filler's area average onto the grid smooths
-#: as much: ATE within 1 % (geometric mean of 13 runs) without it (docs/benchmarks.md, "The filler's
-#: flow without variational refinement").
+#: refinement.  With FAST's 5 refinement iterations it read 0.04 px median deviation from a long
+#: MEDIUM run on a 384 × 512 walk frame pair, against FAST's 0.15; the refinement was 64 % of its
+#: time (21.2 against 7.7 ms a walk pair, one thread), and the filler's area average onto the grid
+#: smooths as much: ATE geometric mean 1.005× over 18 runs without it (docs/benchmarks.md, "The
+#: filler's flow without variational refinement").
 PRESETS = {
     "ultrafast": (cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST, {}),
     "fast": (cv2.DISOPTICAL_FLOW_PRESET_FAST, {}),
