@@ -161,3 +161,25 @@ def test_the_fit_recovers_the_rigid_geometry_through_outliers_and_noise_and_repe
     # ... and flags the movers
     assert np.median(sampson_distance(f, x_i[outliers], x_j[outliers])) > 1.0
     assert np.median(sampson_distance(f_true, x_i[rigid], clean[rigid])) < 1e-6  # the test's own geometry is right
+
+
+def test_cells_an_edge_does_not_see_neither_count_nor_raise_its_threshold():
+    """A cell whose correspondence leaves the view on one edge was not measured there: DIS extrapolates its
+    flow, and its large distance must neither flag it nor raise the edge's noise threshold (the median)."""
+    rng = np.random.default_rng(0)
+    everywhere = np.ones((12, 16), bool)
+    d_short = rng.uniform(0.0, 0.1, (12, 16)).astype(np.float32)  # the adjacent edge: everything in view
+    for gone in (4, 10):  # columns that leave the view on the long edge
+        d_long = rng.uniform(0.0, 0.1, (12, 16)).astype(np.float32)
+        d_long[:, :gone] = 5.0  # extrapolated flow there, far off its epipolar line
+        d_long[5, 12] = 2.0     # a mover inside the view
+        seen_long = everywhere.copy()
+        seen_long[:, :gone] = False
+        blind = moving_mask([d_long, d_short], thresh=0.5, dilate=0)
+        if gone == 4:
+            assert blind[:, :gone].all()  # the old rule zeroes them on every edge
+        else:
+            assert not blind[5, 12]       # the old rule: their 5 px median hides the mover
+        m = moving_mask([d_long, d_short], thresh=0.5, dilate=0, seen=[seen_long, everywhere])
+        assert m[5, 12] and m.sum() == 1
+    assert not moving_mask([d_long], thresh=0.5, dilate=0, seen=[~everywhere]).any()

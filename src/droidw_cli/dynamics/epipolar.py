@@ -149,13 +149,22 @@ def epipolar_distance(flow: np.ndarray, weight: np.ndarray, min_weight: float = 
     return sampson.reshape(h, w).astype(np.float32)
 
 
-def moving_mask(distances: list[np.ndarray], thresh: float, dilate: int, limit: float = 1.0) -> np.ndarray:
+def moving_mask(distances: list[np.ndarray], thresh: float, dilate: int, limit: float = 1.0,
+                seen: list[np.ndarray] | None = None) -> np.ndarray:
     """(h, w) bool: some edge's Sampson distance above its threshold, dilated by ``dilate`` cells, or by
     fewer when the grown mask would cover more than ``limit`` of the view (the largest growth within it;
-    the undilated mask when none is)."""
+    the undilated mask when none is).
+
+    ``seen`` (one (h, w) bool map an edge, optional): the cells whose static point the edge's other frame
+    sees.  A cell it does not (its correspondence leaves the view) was not measured on that edge: DIS's
+    flow there is extrapolated, its distance is no evidence of motion, and it neither counts on that edge
+    nor enters the edge's median."""
     mask = np.zeros(distances[0].shape, dtype=bool)
-    for d in distances:
-        mask |= d > max(thresh, NOISE_FACTOR * float(np.median(d)))
+    for n, d in enumerate(distances):
+        keep = np.ones(d.shape, dtype=bool) if seen is None else np.asarray(seen[n], dtype=bool)
+        if not keep.any():
+            continue
+        mask |= keep & (d > max(thresh, NOISE_FACTOR * float(np.median(d[keep]))))
     for grow in range(dilate, 0, -1):
         if not mask.any():
             break

@@ -246,13 +246,11 @@ class Frontend(KeyframeMaps):
     def _mask_movers(self, frames: set[int]) -> None:
         """Zero the confidence of the masked pixels of these keyframes' outgoing edges.
 
-        The mask of keyframe i is its scene-consistency mask (``dynamics.mode``
-        consistency|both) joined with its epipolar mask (epipolar|both), which
-        is recomputed from all its edges so far; it is always applied to the
-        raw confidences.  The epipolar mask is grown by fewer cells where its full
-        growth would cover over ``MAX_MOVING`` of the view; one over it ungrown means
-        no dominant rigid motion was found, and it is left out.
-        """
+        The mask of keyframe i is its scene-consistency mask (``dynamics.mode`` consistency|both) joined with
+        its epipolar mask (epipolar|both), recomputed from all its edges so far (on each edge only the cells
+        whose static point the current map keeps in view, :meth:`in_view`, once initialised) and applied to
+        the raw confidences.  The epipolar mask grows by fewer cells where its full growth would cover over
+        ``MAX_MOVING`` of the view; over it ungrown, no dominant rigid motion was found: it is left out."""
         d = self.cfg.dynamics
         for i in frames:
             mine = [(key, w) for key, w in self._raw.items()
@@ -260,9 +258,11 @@ class Frontend(KeyframeMaps):
             if not mine:
                 continue
             masked = self.masks.current[i].numpy().copy()
-            epi = [self._epipolar[key][0] for key, _ in mine if key in self._epipolar]
-            if self._segmenting and epi:
-                moving = moving_mask(epi, d.epipolar_thresh, d.epipolar_dilate, MAX_MOVING)
+            keys = [key for key, _ in mine if key in self._epipolar]
+            if self._segmenting and keys:
+                seen = self.in_view(i, [j for _, j in keys]) if self.initialised else None
+                moving = moving_mask([self._epipolar[key][0] for key in keys], d.epipolar_thresh, d.epipolar_dilate,
+                                     MAX_MOVING, seen)
                 if moving.mean() > MAX_MOVING:
                     moving[:] = False
                 self.masks.record(i, moving)

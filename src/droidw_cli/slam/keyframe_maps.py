@@ -7,9 +7,11 @@ features and edges dropped) give their frozen maps.
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 from droidw_cli.ba.uncertainty import uncertainty_map
+from droidw_cli.geometry.projection import reproject
 from droidw_cli.slam.evidence import EVIDENCE_CHANNELS, evidence_maps
 from droidw_cli.slam.optimizer import window_state
 
@@ -20,6 +22,20 @@ UNCERTAINTY_CHUNK = 32
 
 class KeyframeMaps:
     """Evidence, confidence and u of keyframes [lo, hi), as the frontend's state gives them."""
+
+    def in_view(self, i: int, js: list[int]) -> list[np.ndarray]:
+        """(h, w) bool per keyframe j of ``js``: the grid cells of keyframe i whose reprojection into j
+        (Eq. 1, the current poses and disparities) lies in front of it and inside its view (cell centres
+        span [−½, w − ½] × [−½, h − ½])."""
+        buf = self.buffer
+        n = len(buf)
+        ii = torch.full((len(js),), i, dtype=torch.long, device=buf.device)
+        jj = torch.tensor(js, dtype=torch.long, device=buf.device)
+        coords, valid = reproject(buf.poses[:n], buf.disps[:n], self.shared.intrinsics, ii, jj, self.params.min_depth)
+        h, w = buf.grid
+        x, y = coords[..., 0], coords[..., 1]
+        inside = valid & (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
+        return list(inside.cpu().numpy())
 
     def evidence(self, lo: int = 0, hi: int | None = None) -> torch.Tensor | None:
         """Evidence channels (hi − lo, C, h, w) of keyframes [lo, hi) from their cached outgoing edges
