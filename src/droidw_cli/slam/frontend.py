@@ -260,7 +260,7 @@ class Frontend(KeyframeMaps):
             masked = self.masks.current[i].numpy().copy()
             keys = [key for key, _ in mine if key in self._epipolar]
             if self._segmenting and keys:
-                seen = self.in_view(i, [j for _, j in keys]) if self.initialised else None
+                seen = self.in_view(i, [j for _, j in keys]) if self.initialised and d.epipolar_in_view else None
                 moving = moving_mask([self._epipolar[key][0] for key in keys], d.epipolar_thresh, d.epipolar_dilate,
                                      MAX_MOVING, seen)
                 if moving.mean() > MAX_MOVING:
