@@ -268,10 +268,8 @@ class DynamicsConfig:
       dominant epipolar geometry of its edges cannot explain
       (:mod:`droidw_cli.dynamics.epipolar`): Sampson distance above
       ``epipolar_thresh`` working-resolution px on any edge, grown by
-      ``epipolar_dilate`` grid cells; with ``epipolar_in_view`` an edge counts only the cells whose
-      static point the current map keeps in its other keyframe's view.  Off while the focal length is estimated
-      (``--calib auto``): on a real clip the masks took the focal length from
-      617 px to 17 px.
+      ``epipolar_dilate`` grid cells (``epipolar_in_view``: cells the map keeps in view only).  Off while
+      the focal length is estimated (``--calib auto``): on a real clip they took it from 617 px to 17 px.
     * ``consistency``: ADD-SLAM scene consistency (:mod:`droidw_cli.dynamics.inloop`):
       each new keyframe's colour and depth are predicted from its
       ``consistency_sources`` predecessors through the current poses and depths
@@ -292,7 +290,7 @@ class DynamicsConfig:
     mode: str = "epipolar"
     epipolar_thresh: float = 0.5
     epipolar_dilate: int = 2
-    epipolar_in_view: bool = True
+    epipolar_in_view: bool = False
     tau_scale: float = 20.0
     consistency_sources: int = 3
     segmenter: str = "grow"
