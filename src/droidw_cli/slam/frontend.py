@@ -247,8 +247,8 @@ class Frontend(KeyframeMaps):
         """Zero the confidence of the masked pixels of these keyframes' outgoing edges.
 
         The mask of keyframe i is its scene-consistency mask (``dynamics.mode`` consistency|both) joined with
-        its epipolar mask (epipolar|both), recomputed from all its edges so far (on each edge only the cells
-        whose static point the current map keeps in view, :meth:`in_view`, once initialised) and applied to
+        its epipolar mask (epipolar|both), recomputed from all its edges so far (``epipolar_in_view``: on each
+        edge only the cells the current map keeps in view, :meth:`in_view`, once initialised) and applied to
         the raw confidences.  The epipolar mask grows by fewer cells where its full growth would cover over
         ``MAX_MOVING`` of the view; over it ungrown, no dominant rigid motion was found: it is left out."""
         d = self.cfg.dynamics
