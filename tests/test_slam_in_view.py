@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import types
 
+import numpy as np
 import torch
 
 from droidw_cli.slam.keyframe_maps import KeyframeMaps
@@ -43,3 +44,42 @@ def test_a_sideways_step_loses_the_columns_it_leaves_behind_and_a_step_back_lose
 def test_points_behind_the_other_camera_are_not_seen():
     poses = torch.stack([_pose([0, 0, 0]), _pose([0, 0, -2.0])])  # camera 1 two metres ahead, past the points
     assert not _Maps(poses, torch.ones(2, H, W)).in_view(0, [1])[0].any()
+
+
+def _frontend_with_a_step_aside(in_view: bool):
+    """Keyframe 0, keyframe 1 a long step aside (its first 5 columns leave the view), keyframe 2 a short one;
+    the long edge's Sampson map reads 5 px where its cells leave the view, the short one flags one mover."""
+    import dataclasses
+
+    from droidw_cli.ba.registry import get_backend
+    from droidw_cli.config import load_config
+    from droidw_cli.slam.frontend import Frontend
+    from test_slam_backend import _NoMatch
+
+    cfg = load_config("default", [f"dynamics.epipolar_in_view={str(in_view).lower()}", "dynamics.epipolar_dilate=0"])
+    fe = Frontend(cfg, dataclasses.replace(cfg.ba, optimize_focal="none"), get_backend("cpu"), _NoMatch(),
+                  (H, W), torch.tensor([10.0, 10.0, 7.5, 5.5]), 1)
+    image = np.full((H * 8, W * 8, 3), 128, np.uint8)
+    for k, pose in enumerate([_pose([0, 0, 0]), _pose([-0.5, 0, 0]), _pose([-0.05, 0, 0])]):
+        fe.buffer.append(k, k / 30.0, pose, torch.ones(H, W), image[::8, ::8], torch.zeros(1, H, W))
+        fe.masks.append(image, k / 30.0)
+    fe.initialised = True
+    rng = np.random.default_rng(1)
+    maps = {(0, 1): rng.uniform(0, 0.1, (H, W)).astype(np.float32), (0, 2): rng.uniform(0, 0.1, (H, W)).astype(np.float32)}
+    maps[0, 1][:, :5] = 5.0   # extrapolated flow where keyframe 1 does not see keyframe 0's cells
+    maps[0, 2][6, 12] = 2.0   # a mover in view
+    for key, d in maps.items():
+        weight = torch.ones(H, W, 2)
+        fe.cache.put(*key, fe.grid_coords.clone(), weight)
+        fe._raw[key], fe._epipolar[key] = weight, (d, weight)
+    fe._mask_movers({0})
+    return fe.cache.weight((0, 1))[..., 0].float(), fe.cache.weight((0, 2))[..., 0].float()
+
+
+def test_with_the_view_rule_a_cell_leaving_one_edge_s_view_loses_only_that_edge():
+    far, near = _frontend_with_a_step_aside(in_view=True)
+    assert (far[:, :5] == 0).all() and (near[:, :5] == 1).all()  # unseen on the long edge only
+    assert far[6, 12] == 0 and near[6, 12] == 0                  # the mover on both
+    assert far[:, 5:].sum() == far[:, 5:].numel() - 1 and near.sum() == near.numel() - 1
+    far, near = _frontend_with_a_step_aside(in_view=False)
+    assert (near[:, :5] == 0).all()  # without it: zeroed on every edge

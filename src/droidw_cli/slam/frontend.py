@@ -245,12 +245,10 @@ class Frontend(KeyframeMaps):
 
     def _mask_movers(self, frames: set[int]) -> None:
         """Zero the confidence of the masked pixels of these keyframes' outgoing edges.
-
-        The mask of keyframe i is its scene-consistency mask (``dynamics.mode`` consistency|both) joined with
-        its epipolar mask (epipolar|both), recomputed from all its edges so far (``epipolar_in_view``: on each
-        edge only the cells the current map keeps in view, :meth:`in_view`, once initialised) and applied to
-        the raw confidences.  The epipolar mask grows by fewer cells where its full growth would cover over
-        ``MAX_MOVING`` of the view; over it ungrown, no dominant rigid motion was found: it is left out."""
+        Keyframe i's mask: its scene-consistency mask (``dynamics.mode`` consistency|both) joined with its epipolar
+        mask (epipolar|both; from all its edges so far, grown less where it would cover over ``MAX_MOVING``, left
+        out where it does ungrown), applied to the raw confidences.  ``epipolar_in_view`` (once initialised): a
+        cell the map does not keep in an edge's view (:meth:`in_view`) is no evidence there, and gets no weight."""
         d = self.cfg.dynamics
         for i in frames:
             mine = [(key, w) for key, w in self._raw.items()
@@ -258,9 +256,10 @@ class Frontend(KeyframeMaps):
             if not mine:
                 continue
             masked = self.masks.current[i].numpy().copy()
-            keys = [key for key, _ in mine if key in self._epipolar]
+            keys, sees = [key for key, _ in mine if key in self._epipolar], {}
             if self._segmenting and keys:
                 seen = self.in_view(i, [j for _, j in keys]) if self.initialised and d.epipolar_in_view else None
+                sees = dict(zip(keys, seen or []))
                 moving = moving_mask([self._epipolar[key][0] for key in keys], d.epipolar_thresh, d.epipolar_dilate,
                                      MAX_MOVING, seen)
                 if moving.mean() > MAX_MOVING:
@@ -269,7 +268,8 @@ class Frontend(KeyframeMaps):
                 masked |= moving
             keep = torch.from_numpy(~masked).float()[..., None]
             for (a, b), w in mine:
-                self.cache.put(a, b, self.cache.target((a, b)), w * keep)
+                k = keep * torch.from_numpy(sees[a, b])[..., None] if (a, b) in sees else keep
+                self.cache.put(a, b, self.cache.target((a, b)), w * k)
 
     def _detect(self, frames: list[int]) -> None:
         """Scene-consistency masks of these keyframes under the current poses and depths, applied to BA."""
