@@ -46,9 +46,23 @@ def test_points_behind_the_other_camera_are_not_seen():
     assert not _Maps(poses, torch.ones(2, H, W)).in_view(0, [1])[0].any()
 
 
+def test_a_measured_target_inside_the_view_keeps_the_cell_seen():
+    poses = torch.stack([_pose([0, 0, 0]), _pose([-0.5, 0, 0])])
+    maps = _Maps(poses, torch.ones(2, H, W))
+    gy, gx = torch.meshgrid(torch.arange(H, dtype=torch.float32), torch.arange(W, dtype=torch.float32), indexing="ij")
+    target = torch.stack([gx - 5, gy], -1)  # the flow agrees with the map: columns 0-4 leave the view
+    target[3, 2] = torch.tensor([2.0, 3.0])  # a mover's correspondence stays in view
+    seen = maps.in_view(0, [1], [target])[0]
+    left = np.zeros((H, 5), dtype=bool)
+    left[3, 2] = True
+    assert (seen[:, :5] == left).all() and seen[:, 5:].all()
+    assert not maps.in_view(0, [1])[0][3, 2]  # by the map alone it leaves the view
+
+
 def _frontend_with_a_step_aside(in_view: bool):
-    """Keyframe 0, keyframe 1 a long step aside (its first 5 columns leave the view), keyframe 2 a short one;
-    the long edge's Sampson map reads 5 px where its cells leave the view, the short one flags one mover."""
+    """Keyframe 0, keyframe 1 a long step aside (its first 5 columns leave the view, by the map and the flow),
+    keyframe 2 a short one; the long edge's Sampson map reads 5 px where its cells leave the view, and at one
+    mover cell there whose measured target stays in view; the short edge flags one mover."""
     import dataclasses
 
     from droidw_cli.ba.registry import get_backend
@@ -68,9 +82,11 @@ def _frontend_with_a_step_aside(in_view: bool):
     maps = {(0, 1): rng.uniform(0, 0.1, (H, W)).astype(np.float32), (0, 2): rng.uniform(0, 0.1, (H, W)).astype(np.float32)}
     maps[0, 1][:, :5] = 5.0   # extrapolated flow where keyframe 1 does not see keyframe 0's cells
     maps[0, 2][6, 12] = 2.0   # a mover in view
+    targets = {(0, 1): fe.grid_coords - torch.tensor([5.0, 0.0]), (0, 2): fe.grid_coords.clone()}
+    targets[0, 1][3, 2] = torch.tensor([2.0, 3.0])  # the mover's correspondence stays in view
     for key, d in maps.items():
         weight = torch.ones(H, W, 2)
-        fe.cache.put(*key, fe.grid_coords.clone(), weight)
+        fe.cache.put(*key, targets[key], weight)
         fe._raw[key], fe._epipolar[key] = weight, (d, weight)
     fe._mask_movers({0})
     return fe.cache.weight((0, 1))[..., 0].float(), fe.cache.weight((0, 2))[..., 0].float()
@@ -78,8 +94,9 @@ def _frontend_with_a_step_aside(in_view: bool):
 
 def test_with_the_view_rule_a_cell_leaving_one_edge_s_view_loses_only_that_edge():
     far, near = _frontend_with_a_step_aside(in_view=True)
-    assert (far[:, :5] == 0).all() and (near[:, :5] == 1).all()  # unseen on the long edge only
-    assert far[6, 12] == 0 and near[6, 12] == 0                  # the mover on both
-    assert far[:, 5:].sum() == far[:, 5:].numel() - 1 and near.sum() == near.numel() - 1
+    assert (far[:, :5] == 0).all() and near[:, :5].sum() == near[:, :5].numel() - 1  # unseen on the long edge only
+    assert far[6, 12] == 0 and near[6, 12] == 0                  # the movers on both
+    assert near[3, 2] == 0                                       # (the one flagged where only its flow stays in view)
+    assert far[:, 5:].sum() == far[:, 5:].numel() - 1 and near.sum() == near.numel() - 2
     far, near = _frontend_with_a_step_aside(in_view=False)
     assert (near[:, :5] == 0).all()  # without it: zeroed on every edge

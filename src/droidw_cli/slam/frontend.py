@@ -146,8 +146,7 @@ class Frontend(KeyframeMaps):
         """Grid-pixel flow (E, h, w, 2) induced by the current poses/depths, and validity (on the host)."""
         ii = torch.tensor([p[0] for p in pairs], device=self.buffer.device)
         jj = torch.tensor([p[1] for p in pairs], device=self.buffer.device)
-        lo = min(min(p) for p in pairs)
-        hi = max(max(p) for p in pairs) + 1
+        lo, hi = min(min(p) for p in pairs), max(max(p) for p in pairs) + 1
         state = window_state(self.buffer, lo, hi, self.shared, with_features=False)
         coords, valid = self.backend.reproject(state, ii - lo, jj - lo, self.params.min_depth)
         return coords.cpu() - self.grid_coords, valid.cpu()
@@ -247,8 +246,8 @@ class Frontend(KeyframeMaps):
         """Zero the confidence of the masked pixels of these keyframes' outgoing edges.
         Keyframe i's mask: its scene-consistency mask (``dynamics.mode`` consistency|both) joined with its epipolar
         mask (epipolar|both; from all its edges so far, grown less where it would cover over ``MAX_MOVING``, left
-        out where it does ungrown), applied to the raw confidences.  ``epipolar_in_view`` (once initialised): a
-        cell the map does not keep in an edge's view (:meth:`in_view`) is no evidence there, and gets no weight."""
+        out where it does ungrown), applied to the raw confidences.  ``epipolar_in_view`` (once initialised): a cell
+        neither map nor flow keeps in an edge's view (:meth:`in_view`) is no evidence there, and gets no weight."""
         d = self.cfg.dynamics
         for i in frames:
             mine = [(key, w) for key, w in self._raw.items()
@@ -258,7 +257,8 @@ class Frontend(KeyframeMaps):
             masked = self.masks.current[i].numpy().copy()
             keys, sees = [key for key, _ in mine if key in self._epipolar], {}
             if self._segmenting and keys:
-                seen = self.in_view(i, [j for _, j in keys]) if self.initialised and d.epipolar_in_view else None
+                seen = self.in_view(i, [j for _, j in keys], [self.cache.target(k) for k in keys]) \
+                    if self.initialised and d.epipolar_in_view else None
                 sees = dict(zip(keys, seen or []))
                 moving = moving_mask([self._epipolar[key][0] for key in keys], d.epipolar_thresh, d.epipolar_dilate,
                                      MAX_MOVING, seen)

@@ -23,18 +23,21 @@ UNCERTAINTY_CHUNK = 32
 class KeyframeMaps:
     """Evidence, confidence and u of keyframes [lo, hi), as the frontend's state gives them."""
 
-    def in_view(self, i: int, js: list[int]) -> list[np.ndarray]:
+    def in_view(self, i: int, js: list[int], targets: list[torch.Tensor] | None = None) -> list[np.ndarray]:
         """(h, w) bool per keyframe j of ``js``: the grid cells of keyframe i whose reprojection into j
         (Eq. 1, the current poses and disparities) lies in front of it and inside its view (cell centres
-        span [−½, w − ½] × [−½, h − ½])."""
+        span [−½, w − ½] × [−½, h − ½]), or, given ``targets`` (the measured (h, w, 2) target p*_ij per j),
+        whose measured target lies inside it.  The reprojection is that of a static point: a mover's cell
+        can leave the view by the map while its correspondence stays in it, and that correspondence is
+        evidence of motion; a cell unseen by both was extrapolated by the flow and is no evidence."""
         buf = self.buffer
         n = len(buf)
         ii = torch.full((len(js),), i, dtype=torch.long, device=buf.device)
         jj = torch.tensor(js, dtype=torch.long, device=buf.device)
         coords, valid = reproject(buf.poses[:n], buf.disps[:n], self.shared.intrinsics, ii, jj, self.params.min_depth)
-        h, w = buf.grid
-        x, y = coords[..., 0], coords[..., 1]
-        inside = valid & (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
+        inside = valid & _inside(coords, buf.grid)
+        if targets is not None:
+            inside |= _inside(torch.stack([t.to(coords) for t in targets]), buf.grid)
         return list(inside.cpu().numpy())
 
     def evidence(self, lo: int = 0, hi: int | None = None) -> torch.Tensor | None:
@@ -89,3 +92,10 @@ class KeyframeMaps:
             if lo <= k < hi:
                 out[k - lo] = u.float()
         return out
+
+
+def _inside(coords: torch.Tensor, grid: tuple[int, int]) -> torch.Tensor:
+    """(..., h, w) bool: grid coordinates (..., h, w, 2) inside the view [−½, w − ½] × [−½, h − ½]."""
+    h, w = grid
+    x, y = coords[..., 0], coords[..., 1]
+    return (x >= -0.5) & (x <= w - 0.5) & (y >= -0.5) & (y <= h - 0.5)
