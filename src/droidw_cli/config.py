@@ -268,7 +268,7 @@ class DynamicsConfig:
       dominant epipolar geometry of its edges cannot explain
       (:mod:`droidw_cli.dynamics.epipolar`): Sampson distance above
       ``epipolar_thresh`` working-resolution px on any edge, grown by
-      ``epipolar_dilate`` grid cells (``epipolar_in_view``: cells the map keeps in view only).  Off while
+      ``epipolar_dilate`` grid cells (``epipolar_in_view``: cells map or flow keep in view only).  Off while
       the focal length is estimated (``--calib auto``): on a real clip they took it from 617 px to 17 px.
     * ``consistency``: ADD-SLAM scene consistency (:mod:`droidw_cli.dynamics.inloop`):
       each new keyframe's colour and depth are predicted from its
@@ -290,7 +290,7 @@ class DynamicsConfig:
     mode: str = "epipolar"
     epipolar_thresh: float = 0.5
     epipolar_dilate: int = 2
-    epipolar_in_view: bool = False
+    epipolar_in_view: bool = True
     tau_scale: float = 20.0
     consistency_sources: int = 3
     segmenter: str = "grow"
