@@ -155,10 +155,10 @@ def moving_mask(distances: list[np.ndarray], thresh: float, dilate: int, limit: 
     fewer when the grown mask would cover more than ``limit`` of the view (the largest growth within it;
     the undilated mask when none is).
 
-    ``seen`` (one (h, w) bool map an edge, optional): the cells whose static point the edge's other frame
-    sees.  A cell it does not (its correspondence leaves the view) was not measured on that edge: DIS's
-    flow there is extrapolated, its distance is no evidence of motion, and it neither counts on that edge
-    nor enters the edge's median."""
+    ``seen`` (one (h, w) bool map an edge, optional): the cells the edge measured, those that the map or the
+    measured flow keeps inside its other frame (:meth:`~droidw_cli.slam.keyframe_maps.KeyframeMaps.in_view`).
+    A cell outside it was not measured on that edge: DIS's flow there is extrapolated, its distance is no
+    evidence of motion, and it neither counts on that edge nor enters the edge's median."""
     mask = np.zeros(distances[0].shape, dtype=bool)
     for n, d in enumerate(distances):
         keep = np.ones(d.shape, dtype=bool) if seen is None else np.asarray(seen[n], dtype=bool)
