@@ -43,7 +43,8 @@ EVIDENCE_CHANNELS = 2
 WIDE_GAP = 2
 
 
-def evidence_maps(backend: BABackend, state: BAState, edges: EdgeSet, min_depth: float) -> Tensor:
+def evidence_maps(backend: BABackend, state: BAState, edges: EdgeSet, min_depth: float,
+                  projection: tuple[Tensor, Tensor] | None = None) -> Tensor:
     """(N, 2, H, W) evidence of every frame from its outgoing edges (0 where it has none).
 
     One reprojection of the edges, then per-frame sums (``index_add_`` over the
@@ -56,7 +57,7 @@ def evidence_maps(backend: BABackend, state: BAState, edges: EdgeSet, min_depth:
     n = state.num_frames
     h, w = state.grid
     ii = edges.ii.long()
-    coords, valid = backend.reproject(state, ii, edges.jj, min_depth)
+    coords, valid = backend.reproject(state, ii, edges.jj, min_depth) if projection is None else projection
     dev = coords.device
     target = edges.target.to(coords)
     wide = (ii - edges.jj.long()).abs() >= WIDE_GAP

@@ -59,7 +59,8 @@ def window_state(buffer: KeyframeBuffer, lo: int, hi: int, shared: SharedState, 
     )
 
 
-def robust_edges(backend: BABackend, state: BAState, edges: EdgeSet, sigma: float, min_depth: float) -> EdgeSet:
+def robust_edges(backend: BABackend, state: BAState, edges: EdgeSet, sigma: float, min_depth: float,
+                 projection: tuple[Tensor, Tensor] | None = None) -> EdgeSet:
     """The edges with their confidences times the Cauchy IRLS weight of their current residual.
 
     With r = ‖p*_ij − p_ij‖ (grid px) under the state's poses and disparities,
@@ -68,8 +69,9 @@ def robust_edges(backend: BABackend, state: BAState, edges: EdgeSet, sigma: floa
     Σ w / (1 + r²/σ²) · r² with the factor frozen at the linearisation point.
     Correspondences far from the rigid prediction (movers the masks missed,
     flow that failed) lose their pull instead of bending poses quadratically.
+    ``projection``: the backend's ``reproject`` of these edges under this state, when the caller has it.
     """
-    coords, valid = backend.reproject(state, edges.ii, edges.jj, min_depth)
+    coords, valid = backend.reproject(state, edges.ii, edges.jj, min_depth) if projection is None else projection
     coords = coords.to(edges.target)
     dx = edges.target[..., 0] - coords[..., 0]  # per component: a sum over a last axis of 2 is slow on CPU
     dy = edges.target[..., 1] - coords[..., 1]
@@ -93,12 +95,17 @@ def run_window(backend: BABackend, buffer: KeyframeBuffer, lo: int, hi: int, edg
     cost = float("nan")
     for _ in range(iters):
         weighted = use_unc and shared.iterations >= unc.warmup_iters
-        if use_unc and unc.evidence:
-            state = state.with_(map_inputs=evidence_maps(backend, state, edges, params.min_depth))
+        evidence = use_unc and unc.evidence
+        # one reprojection for both users: θ's step leaves poses, disparities and intrinsics as they are
+        projection = backend.reproject(state, edges.ii, edges.jj, params.min_depth) \
+            if evidence or robust_sigma > 0 else None
+        if evidence:
+            state = state.with_(map_inputs=evidence_maps(backend, state, edges, params.min_depth, projection))
         if weighted and optimize_theta:
             state = state.with_(theta=backend.uncertainty_step(state, edges, params).theta)
         step_params = dataclasses.replace(params, t0=fixed, uncertainty=dataclasses.replace(unc, enable=weighted))
-        step_edges = robust_edges(backend, state, edges, robust_sigma, params.min_depth) if robust_sigma > 0 else edges
+        step_edges = robust_edges(backend, state, edges, robust_sigma, params.min_depth, projection) \
+            if robust_sigma > 0 else edges
         result = backend.ba_step(state, step_edges, step_params)
         state, cost = result.state, result.cost
         shared.iterations += 1
