@@ -30,9 +30,9 @@ def _walk(n: int, seed: int = 0) -> list[np.ndarray]:
     return [np.ascontiguousarray(np.repeat(big[:384, s:s + 512, None], 3, axis=2)) for s in x % 300]
 
 
-def _sequential(frames: list[np.ndarray], initialise_at: int) -> list[bool]:
-    """The tracker's decisions without a scout: check, then accept, on one thread."""
-    mf = MotionFilter(MotionFilterConfig(max_gap=4))
+def _sequential(frames: list[np.ndarray], initialise_at: int, max_gap: int = 4) -> list[bool]:
+    """The motion filter's decisions without a scout: check, then accept, on one thread."""
+    mf = MotionFilter(MotionFilterConfig(max_gap=max_gap))
     out, candidates = [], 0
     for image in frames:
         is_kf, _ = mf.check(image, candidates >= initialise_at)
@@ -123,3 +123,29 @@ def test_early_features_come_before_the_match_and_only_after_release():
     scout.close()
     assert order[:3] == ["features", "features", "match"]  # the first candidate has no predecessor to match
     assert order.count("features") == len(flagged) and order.count("match") == len(flagged) - 1
+
+
+def _scouted(frames: list[np.ndarray], initialise_at: int) -> list[bool]:
+    scout = Scout(MotionFilter(MotionFilterConfig(max_gap=50)))
+    got, candidates = [], 0
+    for frame, image, depth, is_kf in scout.frames((_Frame(i), im, None) for i, im in enumerate(frames)):
+        got.append(is_kf)
+        if is_kf:
+            candidates += 1
+            scout.taken(initialised=candidates >= initialise_at)
+    scout.close()
+    return got
+
+
+def test_the_last_frame_is_a_candidate_once_initialised():
+    """Frames after the last keyframe would have no later keyframe to bound them: once the map is initialised
+    the input's last frame is a candidate, even where the camera stood still; before, it is not (a fixed
+    camera builds no map at its end)."""
+    frames = _walk(40)
+    frames += [frames[-1]] * 4  # the camera stops: the motion filter flags none of these
+    filtered = _sequential(frames, initialise_at=3, max_gap=50)
+    assert not any(filtered[-4:])
+    got = _scouted(frames, initialise_at=3)
+    assert got[:-1] == filtered[:-1] and got[-1]
+    never = _scouted(frames, initialise_at=10**6)
+    assert not never[-1] and never == _sequential(frames, initialise_at=10**6, max_gap=50)

@@ -76,12 +76,18 @@ class Scout:
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="droidw-scout") if early else None
 
     def frames(self, items: Iterable[tuple[Any, np.ndarray, Any]]) -> Iterator[Scouted]:
-        """(frame, image, depth) items → (frame, image, depth, is_candidate), in order."""
+        """(frame, image, depth) items → (frame, image, depth, is_candidate), in order.
+
+        Once the map is initialised the input's last frame is always a candidate: frames after the last
+        keyframe have only one keyframe to be placed from, and no later one to bound them (on the ``ride``
+        preset with ``motion_filter.max_gap`` 13 the last 5 frames, placed from the keyframe before them alone,
+        drifted to 1.7 m while the keyframes read 2.6 cm ATE)."""
         previous: tuple[int, np.ndarray] | None = None
-        for frame, image, depth in items:
+        for (frame, image, depth), last in _with_last(items):
             initialised = self._initialised
             with self._timer("motion_filter"):
                 candidate, stats = self.mfilter.check(image, initialised)
+            candidate = candidate or (last and initialised)
             if not candidate:
                 yield frame, image, depth, False
                 continue
@@ -177,3 +183,16 @@ class Scout:
         self._turn.set()
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _with_last(items: Iterable) -> Iterator[tuple[Any, bool]]:
+    """(item, whether it is the last one) for each item, one item behind the input."""
+    it = iter(items)
+    try:
+        held = next(it)
+    except StopIteration:
+        return
+    for item in it:
+        yield held, False
+        held = item
+    yield held, True
