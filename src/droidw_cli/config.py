@@ -86,7 +86,7 @@ class MotionFilterConfig:
     """
 
     thresh: float = 3.0  # grid px
-    max_gap: int = 9  # force a keyframe every max_gap frames (after initialisation)
+    max_gap: int = 13  # force a keyframe every max_gap frames (after initialisation); 9 until 2026-12-03 (docs/benchmarks.md)
     # grid px: the lower quartile of the flow from the first frame stays under 0.10 on the fixed preset (its median
     # reaches 0.63 when a walker fills the view) and 0.02 on vtest.avi; the near-still wobble's 0.9-1.4 after 7-10 frames
     init_min_quartile: float = 0.5
