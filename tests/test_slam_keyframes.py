@@ -275,3 +275,22 @@ def test_a_flat_wall_that_the_flow_drags_along_with_a_mover_makes_no_keyframe():
         with pytest.MonkeyPatch.context() as mp:
             mp.setattr(motion_filter, "EVIDENCE_MIN", floor)
             assert [mf.check(later.copy(), False)[0] for _ in range(6)] == [False] * 4 + [expected] * 2
+
+
+def test_auto_calibration_keeps_the_shorter_keyframe_gap():
+    """With --calib auto the focal length is estimated from the keyframes' views: the motion filter forces a
+    keyframe every ``max_gap_auto`` frames at most (on a 70-frame clip f read 0.2 % off at 9, 10.6 % at 13,
+    tests/test_track_pipeline.py); a known calibration takes ``max_gap``; a smaller ``max_gap`` stays."""
+    import dataclasses
+
+    from droidw_cli.config import TrackConfig
+    from droidw_cli.slam.tracker import motion_filter_config
+
+    cfg = TrackConfig()
+    assert cfg.motion_filter.max_gap == 13 and cfg.motion_filter.max_gap_auto == 9
+    assert motion_filter_config(cfg, auto=False).max_gap == 13
+    assert motion_filter_config(cfg, auto=True).max_gap == 9
+    small = dataclasses.replace(cfg, motion_filter=dataclasses.replace(cfg.motion_filter, max_gap=5))
+    assert motion_filter_config(small, auto=True).max_gap == 5
+    with pytest.raises(ValueError):
+        dataclasses.replace(cfg.motion_filter, max_gap_auto=0)

@@ -78,22 +78,22 @@ GRID_UNIT = "px of the 1/8 grid"
 class MotionFilterConfig:
     """A frame is a keyframe candidate when the mean flow to the last keyframe ≥ ``thresh`` grid px.
 
-    Before initialisation the *median* flow is tested, so a fixed camera watching
-    movers (a minority of the pixels) never builds a map out of people walking by;
-    after ``max_gap`` frames a lower flow quartile of ``init_min_quartile`` grid px
-    is enough (0 = never), so a near-still camera that only wobbles still gets
-    keyframes every ``max_gap`` frames instead of 30-40 frames apart.
+    Before initialisation the *median* flow is tested, so a fixed camera watching movers (a minority of the pixels)
+    never builds a map out of people walking by; after ``max_gap`` frames a lower flow quartile of ``init_min_quartile``
+    grid px is enough (0 = never), so a near-still camera that only wobbles still gets keyframes every ``max_gap``
+    frames instead of 30-40 frames apart.  With ``--calib auto`` (focal length estimated) the gap is ``max_gap_auto`` at most.
     """
 
     thresh: float = 3.0  # grid px
     max_gap: int = 13  # force a keyframe every max_gap frames (after initialisation); 9 until 2026-12-03 (docs/benchmarks.md)
+    max_gap_auto: int = 9  # the focal length needs the views: 70-frame clip, f 0.2 % off at 9, 8 % at 11, 10.6 % at 13
     # grid px: the lower quartile of the flow from the first frame stays under 0.10 on the fixed preset (its median
     # reaches 0.63 when a walker fills the view) and 0.02 on vtest.avi; the near-still wobble's 0.9-1.4 after 7-10 frames
     init_min_quartile: float = 0.5
 
     def __post_init__(self) -> None:
-        if self.thresh <= 0 or self.max_gap < 1 or self.init_min_quartile < 0:
-            raise ValueError("motion_filter.thresh must be > 0, max_gap >= 1 and init_min_quartile >= 0")
+        if self.thresh <= 0 or min(self.max_gap, self.max_gap_auto) < 1 or self.init_min_quartile < 0:
+            raise ValueError("motion_filter.thresh must be > 0, max_gap and max_gap_auto >= 1, init_min_quartile >= 0")
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ import torch
 from tqdm import tqdm
 
 from droidw_cli.ba.interface import BABackend
-from droidw_cli.config import TrackConfig
+from droidw_cli.config import MotionFilterConfig, TrackConfig
 from droidw_cli.dynamics.inloop import observed_disparity
 from droidw_cli.dynamics.objects import DynamicRecord, finish
 from droidw_cli.errors import InputError
@@ -114,6 +114,13 @@ def _dynamic_record(fe: Frontend, preparer: FramePreparer) -> DynamicRecord | No
         work = (table[:, col] + 0.5) * BA_SCALE - 0.5
         table[:, col] = (work + off + 0.5) / scale - 0.5
     return DynamicRecord(rec.masks, rec.ids, table, rec.masked)
+
+
+def motion_filter_config(cfg: TrackConfig, auto: bool) -> MotionFilterConfig:
+    """The motion filter's settings for a run: with ``--calib auto`` (``auto``) a keyframe at least every
+    ``max_gap_auto`` frames, for the views the focal length is estimated from (config.py)."""
+    mf = cfg.motion_filter
+    return dataclasses.replace(mf, max_gap=min(mf.max_gap, mf.max_gap_auto)) if auto else mf
 
 
 def _prepared(source: FrameSource, preparer: FramePreparer) -> Iterator[tuple[Frame, np.ndarray, object]]:
@@ -226,7 +233,8 @@ class Tracker:
         # the motion filter and each new keyframe's edge pair to the previous one run ahead on the
         # prefetch thread, beside the main thread's BA (without a prefetch thread, on the main one)
         ahead = cfg.frontend.match_ahead and cfg.io.prefetch > 0
-        scout = Scout(MotionFilter(cfg.motion_filter, cfg.correspondence.coarsest_scale, cfg.frontend.rotation_start > 0),
+        scout = Scout(MotionFilter(motion_filter_config(cfg, auto), cfg.correspondence.coarsest_scale,
+                                   cfg.frontend.rotation_start > 0),
                       timer,
                       (lambda a, b, start: fe.match_adjacent(a, b, start, self.correspondence)) if ahead else None,
                       self._extract if ahead and self.features is not None else None)
